@@ -1,0 +1,191 @@
+"""Morphology: checks and mass properties of voxel satellites.
+
+A design is an integer grid ``(N, N, N)``: 0 empty, 1 structure, 2 actuator (a 3-axis
+reaction-wheel unit). A design is *valid* when its modules are face-connected
+(6-neighbourhood) and it has at least one actuator.
+
+Body frame B: origin at the centre of mass, axes along the grid's i, j, k index
+directions (right-handed). The cell (i, j, k) has its centre at ``a * (i, j, k)`` in grid
+coordinates, before the shift to the centre of mass. (The paper's reference frame flips
+the third axis; that changes no moment of inertia.)
+
+Inertia tensor convention: ``I = sum_m [ m a^2/6 E + m (|r|^2 E - r r^T) ]``, so the
+off-diagonal entries are the *negatives* of the products of inertia ``sum m x y``.
+
+Single-design functions use numpy (float64); the ``*_batched`` twins take torch tensors
+``(B, N, N, N)`` for the learning code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
+_NEIGHBOURS = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
+
+
+def as_grid(design) -> np.ndarray:
+    """A design (nested lists or array) as an int8 array of shape (N, N, N)."""
+    grid = np.asarray(design, dtype=np.int64)
+    if grid.ndim != 3 or len(set(grid.shape)) != 1:
+        raise ValueError(f"a design is an N x N x N grid; got shape {grid.shape}")
+    if grid.size and (grid.min() < 0 or grid.max() > 2):
+        raise ValueError("design cells must be 0 (empty), 1 (structure) or 2 (actuator)")
+    return grid.astype(np.int8)
+
+
+def is_connected(design) -> bool:
+    """All modules form one face-connected (6-neighbour) component; an empty grid is not."""
+    grid = as_grid(design)
+    filled = grid > 0
+    cells = np.argwhere(filled)
+    if len(cells) == 0:
+        return False
+    seen = np.zeros_like(filled)
+    stack = [tuple(cells[0])]
+    seen[stack[0]] = True
+    n = grid.shape[0]
+    count = 0
+    while stack:
+        c = stack.pop()
+        count += 1
+        for d in _NEIGHBOURS:
+            nb = (c[0] + d[0], c[1] + d[1], c[2] + d[2])
+            if all(0 <= x < n for x in nb) and filled[nb] and not seen[nb]:
+                seen[nb] = True
+                stack.append(nb)
+    return count == len(cells)
+
+
+def has_actuator(design) -> bool:
+    return bool((as_grid(design) == ACTUATOR).any())
+
+
+def validity_problem(design) -> str | None:
+    """None for a valid design, else a sentence saying what is wrong."""
+    grid = as_grid(design)
+    if not (grid > 0).any():
+        return "it has no modules"
+    if not has_actuator(grid):
+        return "it has no actuator module (type 2)"
+    if not is_connected(grid):
+        return "its modules are not face-connected"
+    return None
+
+
+def is_valid(design) -> bool:
+    return validity_problem(design) is None
+
+
+@dataclass(frozen=True)
+class MassProperties:
+    """Mass properties of one design, SI units, body frame B at the centre of mass."""
+
+    mass_kg: float
+    com_grid_m: np.ndarray  # (3,) centre of mass in grid coordinates (cell (0,0,0) centre at origin)
+    inertia_B_kgm2: np.ndarray  # (3, 3) about the centre of mass
+    positions_B_m: np.ndarray  # (M, 3) module centres relative to the centre of mass
+    cells: np.ndarray  # (M, 3) int grid indices of the modules, same order
+    types: np.ndarray  # (M,) module types (1 or 2)
+
+    @property
+    def actuator_positions_B_m(self) -> np.ndarray:
+        return self.positions_B_m[self.types == ACTUATOR]
+
+    def to_dict(self) -> dict:
+        return {
+            "mass_kg": self.mass_kg,
+            "com_grid_m": self.com_grid_m.tolist(),
+            "inertia_B_kgm2": self.inertia_B_kgm2.tolist(),
+            "principal_moments_kgm2": np.linalg.eigvalsh(self.inertia_B_kgm2).tolist(),
+            "modules": int(len(self.types)),
+            "actuators": int((self.types == ACTUATOR).sum()),
+        }
+
+
+def mass_properties(design, module_mass_kg: float = 1.0, module_size_m: float = 0.1) -> MassProperties:
+    """Mass, centre of mass and full inertia tensor (products of inertia included)."""
+    grid = as_grid(design)
+    cells = np.argwhere(grid > 0)
+    if len(cells) == 0:
+        raise ValueError("an empty design has no mass properties")
+    types = grid[tuple(cells.T)].astype(np.int64)
+    m, a = float(module_mass_kg), float(module_size_m)
+    p_grid = cells.astype(np.float64) * a
+    com = p_grid.mean(axis=0)
+    r = p_grid - com
+    own = m * a * a / 6.0  # a solid cube about any axis through its centre
+    inertia = len(cells) * own * np.eye(3) + m * ((r * r).sum() * np.eye(3) - r.T @ r)
+    return MassProperties(
+        mass_kg=m * len(cells),
+        com_grid_m=com,
+        inertia_B_kgm2=inertia,
+        positions_B_m=r,
+        cells=cells,
+        types=types,
+    )
+
+
+# ----------------------------------------------------------------------------- batched
+
+
+def valid_mask_batched(grids: Tensor) -> Tensor:
+    """Validity of B designs at once: (B, N, N, N) integer -> (B,) bool.
+
+    Flood fill by repeated 6-neighbour dilation restricted to filled cells, started from
+    one filled cell per design; at most N^3 iterations, usually about N.
+    """
+    filled = grids > 0
+    B = grids.shape[0]
+    flat = filled.reshape(B, -1)
+    any_filled = flat.any(dim=1)
+    first = flat.float().argmax(dim=1)
+    reached = torch.zeros_like(flat)
+    reached[torch.arange(B, device=grids.device), first] = any_filled
+    reached = reached.reshape(filled.shape)
+    while True:
+        grown = reached.clone()
+        grown[:, 1:] |= reached[:, :-1]
+        grown[:, :-1] |= reached[:, 1:]
+        grown[:, :, 1:] |= reached[:, :, :-1]
+        grown[:, :, :-1] |= reached[:, :, 1:]
+        grown[:, :, :, 1:] |= reached[:, :, :, :-1]
+        grown[:, :, :, :-1] |= reached[:, :, :, 1:]
+        grown &= filled
+        if torch.equal(grown, reached):
+            break
+        reached = grown
+    connected = (reached == filled).reshape(B, -1).all(dim=1)
+    has_act = (grids == ACTUATOR).reshape(B, -1).any(dim=1)
+    return any_filled & connected & has_act
+
+
+def mass_properties_batched(
+    grids: Tensor, module_mass_kg: float = 1.0, module_size_m: float = 0.1, dtype: torch.dtype = torch.float64
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Batched mass properties: (B, N, N, N) -> mass (B,), com (B, 3), inertia (B, 3, 3).
+
+    Designs with no module get mass 0, com 0 and the identity as a harmless inertia (the
+    caller masks them out as invalid).
+    """
+    B, N = grids.shape[0], grids.shape[1]
+    occ = (grids > 0).to(dtype).reshape(B, -1)  # (B, N^3)
+    idx = torch.arange(N, device=grids.device, dtype=dtype) * module_size_m
+    gi, gj, gk = torch.meshgrid(idx, idx, idx, indexing="ij")
+    p = torch.stack((gi, gj, gk), dim=-1).reshape(-1, 3)  # (N^3, 3)
+    count = occ.sum(dim=1)
+    safe = count.clamp(min=1.0)
+    com = occ @ p / safe.unsqueeze(-1)  # (B, 3)
+    r = p.unsqueeze(0) - com.unsqueeze(1)  # (B, N^3, 3)
+    w = occ.unsqueeze(-1) * module_mass_kg
+    rr = (w * r * r).sum(dim=(1, 2))  # (B,)
+    outer = torch.einsum("bni,bnj->bij", w * r, r)
+    eye = torch.eye(3, dtype=dtype, device=grids.device)
+    own = module_mass_kg * module_size_m**2 / 6.0
+    inertia = (count * own + rr).reshape(B, 1, 1) * eye - outer
+    inertia = torch.where((count > 0).reshape(B, 1, 1), inertia, eye.expand(B, 3, 3))
+    return count * module_mass_kg, com, inertia

@@ -1,0 +1,327 @@
+"""`JobSpec`: the one typed description of a modsat run.
+
+The API, the worker, the CLI and the web form all read and write this model. Every
+number is bounded, unknown keys are rejected (``extra="forbid"``), and
+:func:`parse_spec` turns pydantic's errors into messages that name the field, the value
+and the allowed range.
+
+Units are SI and are part of the field names where they matter (``_deg``, ``_Nm``...).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+SPEC_VERSION = 1
+
+# Numbers that appear in several places of the spec.
+PAPER_TAU_3X3X3_NM = 0.8
+PAPER_TAU_5X5X5_NM = 1.5
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+Vec3 = tuple[
+    Annotated[float, Field(ge=-10.0, le=10.0)],
+    Annotated[float, Field(ge=-10.0, le=10.0)],
+    Annotated[float, Field(ge=-10.0, le=10.0)],
+]
+
+
+# Nested lists of cell types, at most 10 deep on each axis (the largest grid).
+_Cell = Annotated[int, Field(ge=0, le=2)]
+DesignGrid = Annotated[
+    list[Annotated[list[Annotated[list[_Cell], Field(max_length=10)]], Field(max_length=10)]],
+    Field(max_length=10),
+]
+
+
+class DesignSpace(_Section):
+    """The morphology search space: an N x N x N grid of cube modules."""
+
+    grid_size: int = Field(3, ge=2, le=10, description="N: the design grid is N x N x N cells.")
+    design_steps: int = Field(
+        10, ge=1, le=50, description="Synchronous NCA update steps from the seed module (design phase)."
+    )
+    fixed_design: DesignGrid | None = Field(
+        None,
+        description=(
+            "A given morphology (N x N x N nested lists of 0 empty, 1 structure, 2 actuator). "
+            "Required by `td3-control`, which trains a controller for this design only."
+        ),
+    )
+    invalid_penalty: float = Field(
+        -100.0,
+        ge=-1e6,
+        le=0.0,
+        description=(
+            "Return of an episode whose design is invalid. It is clamped below the worst "
+            "return any valid design can get, so an invalid design is never preferred."
+        ),
+    )
+
+    @field_validator("fixed_design")
+    @classmethod
+    def _check_fixed_design(cls, v: list[list[list[int]]] | None, info: Any) -> list[list[list[int]]] | None:
+        if v is None:
+            return v
+        n = info.data.get("grid_size")
+        if n is None:
+            return v
+        if len(v) != n or any(len(row) != n for row in v) or any(len(c) != n for row in v for c in row):
+            raise ValueError(f"fixed_design must be a {n} x {n} x {n} nested list (grid_size is {n})")
+        from .morphology import validity_problem  # local: morphology imports numpy only
+
+        problem = validity_problem(v)
+        if problem:
+            raise ValueError(f"fixed_design is not a valid satellite: {problem}")
+        return v
+
+
+class ModuleCatalog(_Section):
+    """Physical properties of the cube modules (paper: 1.0 kg, 0.1 m cubes)."""
+
+    module_mass_kg: float = Field(1.0, gt=0.0, le=1000.0, description="Mass of every module.")
+    module_size_m: float = Field(0.1, gt=0.0, le=10.0, description="Edge length of the cube modules.")
+    torque_scale_Nm: float = Field(
+        PAPER_TAU_3X3X3_NM,
+        gt=0.0,
+        le=100.0,
+        description="Per-axis torque limit of one actuator module (the paper's torque scale).",
+    )
+    actuator_model: Literal["ideal-torque", "reaction-wheel"] = Field(
+        "reaction-wheel",
+        description=(
+            "`ideal-torque`: the control torque acts directly on the body, no momentum state "
+            "(reproduces the paper). `reaction-wheel`: each actuator module is a 3-axis wheel "
+            "unit that stores the momentum it takes from the body."
+        ),
+    )
+    momentum_capacity_Nms: float | None = Field(
+        None,
+        gt=0.0,
+        le=1000.0,
+        description=(
+            "Per-axis momentum capacity of one wheel unit; a wheel at capacity cannot "
+            "accelerate further in that direction. null = unlimited. Only for `reaction-wheel`."
+        ),
+    )
+
+
+class RewardSpec(_Section):
+    """Shaped reward with safety constraint (Elkins et al. 2020)."""
+
+    error_scale_rad: float = Field(
+        0.14 * 2 * math.pi, gt=0.0, le=10.0, description="phi scale of the exp(-phi/scale) term."
+    )
+    no_progress_penalty: float = Field(
+        1.0, ge=0.0, le=100.0, description="Subtracted when the error angle did not decrease."
+    )
+    in_tolerance_bonus: float = Field(9.0, ge=0.0, le=1000.0, description="Added while phi <= tolerance.")
+    safety_penalty: float = Field(
+        50.0, ge=0.0, le=1e4, description="Subtracted once when the rate limit is exceeded (episode ends)."
+    )
+
+
+class Mission(_Section):
+    """Large-angle slew then hold, with the paper's integration settings."""
+
+    slew_min_deg: float = Field(30.0, ge=0.0, le=180.0, description="Smallest slew angle drawn.")
+    slew_max_deg: float = Field(150.0, ge=0.0, le=180.0, description="Largest slew angle drawn.")
+    tolerance_deg: float = Field(0.25, gt=0.0, le=180.0, description="Pointing tolerance for success.")
+    rate_tolerance_rad_s: float = Field(
+        0.01, gt=0.0, le=10.0, description="Body rate below which the satellite counts as settled."
+    )
+    rate_limit_rad_s: float = Field(
+        0.5, gt=0.0, le=10.0, description="Safety limit on |omega|; exceeding it ends the episode."
+    )
+    physics_dt_s: float = Field(1.0 / 240.0, gt=0.0, le=1.0, description="RK4 step.")
+    frame_skip: int = Field(20, ge=1, le=1000, description="Physics steps per control step.")
+    episode_steps: int = Field(500, ge=1, le=100_000, description="Control steps per episode.")
+    orbit_altitude_km: float = Field(500.0, ge=100.0, le=100_000.0, description="Circular orbit altitude.")
+    gravity_gradient: bool = Field(True, description="Apply the gravity-gradient torque.")
+    residual_torque_Nm: Vec3 = Field((0.0, 0.0, 0.0), description="Constant body-frame disturbance torque.")
+    residual_torque_std_Nm: float = Field(
+        0.0, ge=0.0, le=10.0, description="Std of a random constant body-frame torque drawn per episode."
+    )
+    reward: RewardSpec = Field(default_factory=RewardSpec)
+
+    @model_validator(mode="after")
+    def _check_range(self) -> Mission:
+        if self.slew_min_deg > self.slew_max_deg:
+            raise ValueError(
+                f"slew_min_deg ({self.slew_min_deg}) must not exceed slew_max_deg ({self.slew_max_deg})"
+            )
+        return self
+
+    @property
+    def control_dt_s(self) -> float:
+        return self.physics_dt_s * self.frame_skip
+
+
+class Training(_Section):
+    """TD3 hyper-parameters (paper table) and the run's budget."""
+
+    total_env_steps: int = Field(200_000, ge=1, le=1_000_000_000, description="Budget in control steps.")
+    num_envs: int = Field(16, ge=1, le=8192, description="Episodes simulated in parallel.")
+    hidden_sizes: list[Annotated[int, Field(ge=4, le=2048)]] = Field(
+        default_factory=lambda: [400, 300], min_length=1, max_length=4, description="Shared trunk layers."
+    )
+    actor_lr: float = Field(3e-4, gt=0.0, le=1.0, description="Adam learning rate of the shared actor.")
+    critic_lr: float = Field(3e-3, gt=0.0, le=1.0, description="Adam learning rate of the twin critics.")
+    batch_size: int = Field(512, ge=1, le=65536, description="Transitions per gradient update.")
+    buffer_size: int = Field(500_000, ge=100, le=10_000_000, description="Replay buffer capacity (transitions).")
+    gamma: float = Field(0.99, ge=0.0, lt=1.0, description="Discount factor.")
+    tau: float = Field(0.005, gt=0.0, le=1.0, description="Polyak factor (the paper's 0.995 written the other way).")
+    exploration_noise: float = Field(0.2, ge=0.0, le=2.0, description="Std of the Gaussian action noise.")
+    design_exploration: float = Field(
+        0.1, ge=0.0, le=1.0, description="Probability that a cell's design action is replaced by a random type."
+    )
+    policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
+    noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
+    policy_delay: int = Field(2, ge=1, le=100, description="Critic updates per actor/target update.")
+    train_frequency: int = Field(2, ge=1, le=1000, description="Env steps between gradient updates.")
+    learning_starts: int = Field(10_000, ge=0, le=10_000_000)
+    eval_every_steps: int = Field(20_000, ge=1, le=1_000_000_000)
+    eval_episodes: int = Field(16, ge=1, le=1000, description="Episodes of each evaluation on the curve.")
+    checkpoint_every_steps: int = Field(50_000, ge=1, le=1_000_000_000)
+    device: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` uses a GPU where torch sees one.")
+
+
+class GA(_Section):
+    """Genetic-algorithm baseline (Evolution Gym style), TD3 as the inner loop."""
+
+    population_size: int = Field(12, ge=2, le=1000, description="Designs per generation.")
+    survivor_start: float = Field(0.6, ge=0.0, le=1.0, description="Survivor fraction at the start of the budget.")
+    survivor_end: float = Field(0.0, ge=0.0, le=1.0, description="Survivor fraction at the end of the budget.")
+    mutation_rate: float = Field(0.1, ge=0.0, le=1.0, description="Probability that a cell changes type.")
+    steps_per_design: int = Field(
+        50_000, ge=1, le=100_000_000, description="Env steps of the TD3 inner loop for each new design."
+    )
+
+
+class Evaluation(_Section):
+    """The Monte-Carlo evaluation: a fixed, seeded set of slews."""
+
+    episodes: int = Field(100, ge=1, le=10_000, description="Slews in the final Monte-Carlo evaluation.")
+    seed: int = Field(12345, ge=0, le=2**31 - 1, description="Seed of the slew set (independent of training).")
+    trajectories: int = Field(3, ge=0, le=50, description="Episodes whose full time history is kept.")
+
+
+class JobSpec(_Section):
+    """A whole run: what to optimise, on which mission, with which budget."""
+
+    version: Literal[1] = SPEC_VERSION
+    name: str | None = Field(None, max_length=200, description="A label for people; not used by the run.")
+    algorithm: Literal["td3-codesign", "ga", "td3-control"] = Field(
+        "td3-codesign",
+        description="`td3-codesign`: NCA design + control by TD3 (paper). `ga`: GA over designs with TD3 "
+        "inner loops. `td3-control`: TD3 control of `design.fixed_design`.",
+    )
+    seed: int = Field(0, ge=0, le=2**31 - 1, description="Seeds networks, exploration and training slews.")
+    design: DesignSpace = Field(default_factory=DesignSpace)
+    modules: ModuleCatalog = Field(default_factory=ModuleCatalog)
+    mission: Mission = Field(default_factory=Mission)
+    training: Training = Field(default_factory=Training)
+    ga: GA = Field(default_factory=GA)
+    evaluation: Evaluation = Field(default_factory=Evaluation)
+
+    @model_validator(mode="after")
+    def _check_consistency(self) -> JobSpec:
+        if self.algorithm == "td3-control" and self.design.fixed_design is None:
+            raise ValueError("algorithm 'td3-control' needs design.fixed_design")
+        if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
+            raise ValueError("modules.momentum_capacity_Nms is only meaningful with actuator_model 'reaction-wheel'")
+        return self
+
+
+class SpecError(ValueError):
+    """A spec that failed validation; ``messages`` has one readable line per problem."""
+
+    def __init__(self, messages: list[str], errors: list[dict[str, Any]] | None = None):
+        self.messages = messages
+        self.errors = errors or []
+        super().__init__("invalid spec:\n  " + "\n  ".join(messages))
+
+
+def _field_schema(loc: tuple[Any, ...]) -> dict[str, Any] | None:
+    """The JSON-schema node of the field at ``loc`` (resolving $refs), or None."""
+    schema = JobSpec.model_json_schema()
+    defs = schema.get("$defs", {})
+    node: dict[str, Any] = schema
+    for part in loc:
+        while "$ref" in node:
+            node = defs[node["$ref"].rsplit("/", 1)[-1]]
+        if "anyOf" in node:  # Optional[...]: take the non-null branch
+            node = next((n for n in node["anyOf"] if n.get("type") != "null"), node)
+            while "$ref" in node:
+                node = defs[node["$ref"].rsplit("/", 1)[-1]]
+        if isinstance(part, int):
+            if "items" in node:
+                node = node["items"]
+            elif "prefixItems" in node and part < len(node["prefixItems"]):
+                node = node["prefixItems"][part]
+            else:
+                return None
+        else:
+            props = node.get("properties", {})
+            if part not in props:
+                return None
+            node = props[part]
+    while "$ref" in node:
+        node = defs[node["$ref"].rsplit("/", 1)[-1]]
+    return node
+
+
+def _range_text(node: dict[str, Any]) -> str | None:
+    lo = node.get("minimum", node.get("exclusiveMinimum"))
+    hi = node.get("maximum", node.get("exclusiveMaximum"))
+    if lo is None and hi is None:
+        return None
+    lo_s = "" if lo is None else (f"> {lo}" if "exclusiveMinimum" in node else f">= {lo}")
+    hi_s = "" if hi is None else (f"< {hi}" if "exclusiveMaximum" in node else f"<= {hi}")
+    return " and ".join(s for s in (lo_s, hi_s) if s)
+
+
+def format_errors(exc: ValidationError) -> list[str]:
+    """One line per pydantic error: field path, offending value, and what is allowed."""
+    out = []
+    for err in exc.errors():
+        loc = tuple(p for p in err["loc"])
+        path = ".".join(str(p) for p in loc) or "(spec)"
+        kind = err["type"]
+        value = err.get("input")
+        if kind == "extra_forbidden":
+            parent = _field_schema(loc[:-1]) if len(loc) > 1 else JobSpec.model_json_schema()
+            allowed = sorted((parent or {}).get("properties", {}))
+            out.append(f"{path}: unknown field; allowed fields here: {', '.join(allowed)}")
+            continue
+        node = _field_schema(loc) if loc else None
+        rng = _range_text(node) if node else None
+        if kind in {"greater_than", "greater_than_equal", "less_than", "less_than_equal"} and rng:
+            out.append(f"{path}: {value!r} is out of range; allowed: {rng}")
+        elif kind == "literal_error":
+            out.append(f"{path}: {value!r} is not allowed; {err['msg'].lower()}")
+        elif kind == "value_error" or kind == "assertion_error":
+            msg = err["msg"].removeprefix("Value error, ")
+            out.append(f"{path}: {msg}")
+        else:
+            extra = f" (allowed: {rng})" if rng else ""
+            shown = repr(value) if not isinstance(value, dict) else "{...}"
+            out.append(f"{path}: {err['msg']}; got {shown}{extra}")
+    return out
+
+
+def parse_spec(data: dict[str, Any] | str | bytes) -> JobSpec:
+    """Validate a spec given as a dict or JSON text; raise :class:`SpecError` with readable messages."""
+    try:
+        if isinstance(data, (str, bytes)):
+            return JobSpec.model_validate_json(data)
+        return JobSpec.model_validate(data)
+    except ValidationError as exc:
+        raise SpecError(format_errors(exc), exc.errors(include_url=False)) from None
