@@ -100,7 +100,7 @@ def bench_sim(batch_sizes=(1, 256, 4096), min_seconds: float = 2.0, dtype: str =
     results = {"numpy_1": {"batch": 1, "control_steps_per_s": n / el}}
     torch_dtype = {"float32": torch.float32, "float64": torch.float64}[dtype]
     for B in batch_sizes:
-        sim = SlewSim([design] * B, mission, modules, dtype=torch_dtype)
+        sim = SlewSim.from_designs([design] * B, mission, modules, dtype=torch_dtype)
         sim.reset(list(range(B)), [draw] * B)
         action = torch.full((B, sim.K, 3), 0.01, dtype=torch_dtype)
         n, el = _rate(lambda: sim.step(action), min_seconds)

@@ -56,6 +56,159 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _load_spec(args: argparse.Namespace):
+    from .presets import get_preset
+    from .spec import parse_spec
+
+    if (args.preset is None) == (args.spec is None):
+        raise SystemExit("modsat train: give either --preset NAME or a SPEC.json file")
+    if args.preset is not None:
+        spec = get_preset(args.preset)
+    else:
+        with open(args.spec, "rb") as fh:
+            spec = parse_spec(fh.read())
+    updates = {}
+    if args.steps is not None:
+        updates["total_env_steps"] = args.steps
+    if args.device is not None:
+        updates["device"] = args.device
+    if updates:
+        spec = spec.model_copy(update={"training": spec.training.model_copy(update=updates)})
+    if args.seed is not None:
+        spec = spec.model_copy(update={"seed": args.seed})
+    return parse_spec(spec.model_dump_json())  # re-validated after the overrides
+
+
+class _ProgressBar:
+    """One line on a terminal, redrawn in place; a line per evaluation otherwise."""
+
+    def __init__(self, stream=sys.stderr):
+        import time
+
+        self.stream, self.t0, self.time = stream, time.monotonic(), time.monotonic
+        self.tty = stream.isatty()
+        self.last_eval = ""
+
+    def __call__(self, p: dict) -> None:
+        done, total = p["env_steps"], max(p["total_env_steps"], 1)
+        el = self.time() - self.t0
+        rate = done / el if el > 0 else 0.0
+        eta = (total - done) / rate if rate > 0 else float("nan")
+        if p.get("eval"):
+            e = p["eval"]
+            self.last_eval = f"eval return {e['mean_return']:.1f}, success {100 * e['success_rate']:.0f}%"
+        width = 24
+        fill = int(width * min(done / total, 1.0))
+        line = (f"[{'#' * fill}{'.' * (width - fill)}] {done:,}/{total:,} steps  {rate:,.0f} steps/s  "
+                f"eta {eta:,.0f} s  {p.get('phase', '')}  {self.last_eval}")
+        if self.tty:
+            self.stream.write("\r" + line[:160].ljust(160))
+        elif p.get("eval") or p.get("phase") == "evaluating":
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    import os
+    import signal
+
+    from .train import checkpoint_from_bytes, checkpoint_to_bytes, train
+
+    spec = _load_spec(args)
+    out = args.out
+    os.makedirs(out, exist_ok=True)
+    ckpt_path = os.path.join(out, "checkpoint.pt")
+    checkpoint = None
+    if args.resume and os.path.exists(ckpt_path):
+        with open(ckpt_path, "rb") as fh:
+            checkpoint = checkpoint_from_bytes(fh.read())
+        print(f"resuming from {ckpt_path} at {checkpoint['env_steps']:,} env steps", file=sys.stderr)
+    stop = {"flag": False}
+
+    def on_sigint(*_):
+        stop["flag"] = True
+
+    def save_ckpt(ck: dict) -> None:
+        tmp = ckpt_path + ".tmp"
+        with open(tmp, "wb") as fh:
+            fh.write(checkpoint_to_bytes(ck))
+        os.replace(tmp, ckpt_path)
+
+    old = signal.signal(signal.SIGINT, on_sigint)
+    bar = _ProgressBar()
+    try:
+        result = train(spec, on_progress=bar, on_checkpoint=save_ckpt, should_stop=lambda: stop["flag"],
+                       checkpoint=checkpoint)
+    finally:
+        signal.signal(signal.SIGINT, old)
+        bar.close()
+    if result.stopped:
+        print(f"stopped at {result.env_steps:,} env steps; continue with: modsat train ... --out {out} --resume",
+              file=sys.stderr)
+        return 130
+    for name, data in result.artifacts().items():
+        with open(os.path.join(out, name), "wb") as fh:
+            fh.write(data)
+    if os.path.exists(ckpt_path):
+        os.remove(ckpt_path)
+    _print_evaluation(result.summary, sys.stdout)
+    print(f"outputs in {out}/: {', '.join(sorted(result.artifacts()))}")
+    return 0
+
+
+def _print_evaluation(summary: dict, stream) -> None:
+    d = summary.get("design", {})
+    print(f"design: {d.get('modules')} modules, {d.get('actuators')} actuators, valid={d.get('valid')}", file=stream)
+    rows = [("policy", summary.get("policy"))]
+    if summary.get("pd_baseline"):
+        rows.append(("PD baseline", summary["pd_baseline"]))
+    print(f"{'':<12} {'episodes':>8} {'success':>8} {'@0.25deg':>9} {'@1deg':>7} {'return':>16} "
+          f"{'slew/bound':>10}", file=stream)
+    for name, s in rows:
+        if s is None:
+            continue
+
+        def pct(key):
+            return f"{100 * s[key]:.0f}%" if s.get(key) is not None else "-"
+
+        ratio = s.get("median_slew_time_ratio")
+        print(f"{name:<12} {s['episodes']:>8} {pct('success_rate'):>8} {pct('success_rate_at_0.25_deg'):>9} "
+              f"{pct('success_rate_at_1_deg'):>7} {s['mean_return']:>8.1f} +/- {s.get('std_return', 0):<5.1f} "
+              f"{'-' if ratio is None else f'{ratio:.2f}':>10}", file=stream)
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    import os
+
+    from .train import final_evaluation, load_policy
+
+    path = os.path.join(args.run_dir, "policy.pt")
+    with open(path, "rb") as fh:
+        actor, grid, spec = load_policy(fh.read())
+    if grid is None:
+        print("modsat: this policy has no design", file=sys.stderr)
+        return 2
+    ev = final_evaluation(actor, grid, spec, episodes=args.episodes)
+    ev.pop("trajectories")
+    if args.json:
+        ev["policy"].pop("episodes", None)
+        if ev["pd_baseline"]:
+            ev["pd_baseline"].pop("episodes", None)
+        print(json.dumps(ev, indent=2))
+    else:
+        from .train import design_report
+
+        d = design_report(grid, spec)
+        summary = {"design": d, "policy": ev["policy"]["summary"],
+                   "pd_baseline": ev["pd_baseline"]["summary"] if ev["pd_baseline"] else None}
+        _print_evaluation(summary, sys.stdout)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="modsat", description="Co-design of modular satellites and their attitude control.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -81,13 +234,39 @@ def build_parser() -> argparse.ArgumentParser:
     ck = sub.add_parser("check", help="validate a spec file (JSON)")
     ck.add_argument("spec")
     ck.set_defaults(func=_cmd_check)
+
+    tr = sub.add_parser("train", help="train a co-design (or GA / control-only) run and write its outputs")
+    tr.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
+    tr.add_argument("--preset", help="a named preset (see `modsat presets`)")
+    tr.add_argument("--out", required=True, help="output directory")
+    tr.add_argument("--steps", type=int, help="override training.total_env_steps")
+    tr.add_argument("--seed", type=int, help="override the seed")
+    tr.add_argument("--device", choices=["auto", "cpu", "cuda"], help="override training.device")
+    tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt (after Ctrl-C)")
+    tr.set_defaults(func=_cmd_train)
+
+    ev = sub.add_parser("eval", help="Monte-Carlo evaluation of a trained run (policy and PD baseline)")
+    ev.add_argument("run_dir", help="a directory written by `modsat train`")
+    ev.add_argument("--episodes", type=int, help="number of seeded slews (default: the spec's)")
+    ev.add_argument("--json", action="store_true")
+    ev.set_defaults(func=_cmd_eval)
+
+    _add_service_commands(sub)
     return p
+
+
+def _add_service_commands(sub) -> None:
+    """`serve` and `worker` live with the service (server/, worker/), in the same distribution."""
+    # SERVICE-COMMANDS: server.cli.add_commands(sub) is wired here once server/ exists.
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if getattr(args, "seconds", 1.0) <= 0 or any(b < 1 or b > 1_000_000 for b in getattr(args, "batch", [])):
         print("modsat: --seconds must be > 0 and --batch sizes between 1 and 1,000,000", file=sys.stderr)
+        return 2
+    if getattr(args, "episodes", None) is not None and not 1 <= args.episodes <= 10_000:
+        print("modsat: --episodes must be between 1 and 10,000", file=sys.stderr)
         return 2
     from .spec import SpecError
 

@@ -96,8 +96,8 @@ class SatelliteSlewEnv(gym.Env):
 
     def __init__(self, spec: JobSpec | dict | None = None, design=None, dtype: str = "float64", device: str = "cpu"):
         self.spec_model, self.design = _resolve(spec, design)
-        self.sim = SlewSim([self.design], self.spec_model.mission, self.spec_model.modules,
-                           dtype=_DTYPES[dtype], device=device)
+        self.sim = SlewSim.from_designs([self.design], self.spec_model.mission, self.spec_model.modules,
+                                        dtype=_DTYPES[dtype], device=device)
         self.observation_space, self.action_space = _spaces(self.sim)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -133,8 +133,8 @@ class SatelliteSlewVectorEnv(gym.vector.VectorEnv):
                  dtype: str = "float64", device: str = "cpu"):
         self.num_envs = num_envs
         self.spec_model, self.design = _resolve(spec, design)
-        self.sim = SlewSim([self.design] * num_envs, self.spec_model.mission, self.spec_model.modules,
-                           dtype=_DTYPES[dtype], device=device)
+        self.sim = SlewSim.from_designs([self.design] * num_envs, self.spec_model.mission,
+                                        self.spec_model.modules, dtype=_DTYPES[dtype], device=device)
         self.single_observation_space, self.single_action_space = _spaces(self.sim)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)

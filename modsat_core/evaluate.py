@@ -89,7 +89,7 @@ def monte_carlo(
         designs = [designs] * episodes
     if len(designs) != episodes:
         raise ValueError(f"{len(designs)} designs for {episodes} episodes")
-    sim = SlewSim(designs, mission, modules, dtype=dtype, device=device)
+    sim = SlewSim.from_designs(designs, mission, modules, dtype=dtype, device=device)
     sim.reset(list(range(episodes)), [draw_episode(r, mission) for r in episode_rngs(seed, episodes)])
     if isinstance(controller, type):
         controller = controller(sim)

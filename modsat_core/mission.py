@@ -78,13 +78,14 @@ def error_quaternion(q_TN: Tensor, q_BN: Tensor) -> Tensor:
 
 
 def reward(
-    phi_rad: Tensor, phi_prev_rad: Tensor, omega_norm: Tensor, mission: Mission
+    phi_rad: Tensor, phi_prev_rad: Tensor, omega_norm: Tensor, mission: Mission, steps_left: Tensor | None = None
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Per-step reward (Elkins et al. 2020) and safety violation.
 
     ``exp(-phi / scale)``, minus ``no_progress_penalty`` when phi did not decrease, plus
     ``in_tolerance_bonus`` while phi <= tolerance; a rate above the limit ends the episode
-    with ``-safety_penalty``. Returns (reward, in_tolerance, violated), each (B,).
+    with ``-safety_penalty`` (minus ``safety_penalty_per_remaining_step`` for each of the
+    ``steps_left`` control steps it had left). Returns (reward, in_tolerance, violated), each (B,).
     """
     r: RewardSpec = mission.reward
     tol = mission.tolerance_deg * quat.DEG
@@ -93,7 +94,10 @@ def reward(
     rew = rew - r.no_progress_penalty * (phi_rad >= phi_prev_rad).to(rew.dtype)
     rew = rew + r.in_tolerance_bonus * in_tol.to(rew.dtype)
     violated = omega_norm > mission.rate_limit_rad_s
-    rew = torch.where(violated, torch.full_like(rew, -r.safety_penalty), rew)
+    penalty = torch.full_like(rew, -r.safety_penalty)
+    if steps_left is not None and r.safety_penalty_per_remaining_step:
+        penalty = penalty - r.safety_penalty_per_remaining_step * steps_left.to(rew.dtype)
+    rew = torch.where(violated, penalty, rew)
     return rew, in_tol, violated
 
 
@@ -101,7 +105,10 @@ def return_bounds(mission: Mission) -> tuple[float, float]:
     """The lowest and highest return any episode on a valid design can get."""
     r = mission.reward
     per_step_min = -r.no_progress_penalty  # exp(.) > 0
-    low = min(-r.safety_penalty + (mission.episode_steps - 1) * per_step_min, mission.episode_steps * per_step_min)
+    T = mission.episode_steps
+    # A violation at step k: k - 1 steps of at least per_step_min, then the penalty.
+    worst_violation = -r.safety_penalty + (T - 1) * min(per_step_min, -r.safety_penalty_per_remaining_step)
+    low = min(worst_violation, T * per_step_min)
     high = mission.episode_steps * (1.0 + r.in_tolerance_bonus)
     return low, high
 

@@ -26,6 +26,11 @@ _PAPER_TRAINING = {
     "checkpoint_every_steps": 50_000,
 }
 
+# The presets made for CPU budgets charge a rate-limit violation for the steps it skips,
+# so that spinning up to end the episode is never cheaper than holding still: with the
+# paper's fixed -50 that exit is a local optimum a short run falls into (docs/learning.md).
+_NO_EARLY_EXIT = {"safety_penalty_per_remaining_step": 1.0}
+
 
 def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
     return JobSpec.model_validate({
@@ -50,10 +55,11 @@ PRESETS: dict[str, JobSpec] = {
         "algorithm": "td3-codesign",
         "design": {"grid_size": 3},
         "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
-        "mission": {"episode_steps": 120, "slew_min_deg": 30.0, "slew_max_deg": 90.0, "tolerance_deg": 1.0},
+        "mission": {"episode_steps": 120, "slew_min_deg": 30.0, "slew_max_deg": 90.0, "tolerance_deg": 1.0,
+                    "reward": _NO_EARLY_EXIT},
         "training": {
-            "total_env_steps": 30_000, "num_envs": 16, "hidden_sizes": [64, 64], "batch_size": 256,
-            "buffer_size": 100_000, "learning_starts": 2_000, "eval_every_steps": 5_000,
+            "total_env_steps": 30_000, "num_envs": 16, "hidden_sizes": [64, 64], "batch_size": 128,
+            "train_frequency": 4, "buffer_size": 100_000, "learning_starts": 2_000, "eval_every_steps": 5_000,
             "eval_episodes": 16, "checkpoint_every_steps": 10_000, "device": "cpu",
         },
         "evaluation": {"episodes": 32},
@@ -64,6 +70,7 @@ PRESETS: dict[str, JobSpec] = {
         "algorithm": "td3-codesign",
         "design": {"grid_size": 3},
         "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
+        "mission": {"reward": _NO_EARLY_EXIT},
         "training": {
             "total_env_steps": 400_000, "num_envs": 32, "hidden_sizes": [128, 128], "batch_size": 256,
             "buffer_size": 400_000, "learning_starts": 10_000, "eval_every_steps": 20_000,

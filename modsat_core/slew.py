@@ -104,22 +104,21 @@ class SlewSim:
 
     def __init__(
         self,
-        designs: list[Design],
+        I_B: np.ndarray | Tensor,
+        actuator_mask: np.ndarray | Tensor,
         mission: Mission,
         modules: ModuleCatalog,
         *,
         dtype: torch.dtype = torch.float32,
         device: str | torch.device = "cpu",
     ):
+        """B satellites given by their inertia (B, 3, 3) and wheel-unit slots (B, K) bool."""
         self.mission, self.modules = mission, modules
         self.dtype, self.device = dtype, torch.device(device)
-        self.B = len(designs)
-        self.K = max(d.n_actuators for d in designs)
         kw = dict(dtype=dtype, device=self.device)
-        I_B = torch.tensor(np.stack([d.I_B for d in designs]), **kw)
-        mask = torch.zeros(self.B, self.K, dtype=torch.bool, device=self.device)
-        for i, d in enumerate(designs):
-            mask[i, : d.n_actuators] = True
+        I_B = torch.as_tensor(I_B, **kw).clone()
+        mask = torch.as_tensor(actuator_mask, dtype=torch.bool, device=self.device).clone()
+        self.B, self.K = mask.shape
         wheels = modules.actuator_model == "reaction-wheel"
         cap = modules.momentum_capacity_Nms
         self.plant = dyn.Plant(
@@ -146,6 +145,22 @@ class SlewSim:
         # Scale of the wheel-momentum observation: the capacity, else what one unit stores
         # in one second at full torque.
         self.h_scale_Nms = cap if cap is not None else modules.torque_scale_Nm
+
+    @classmethod
+    def from_designs(cls, designs: list[Design], mission: Mission, modules: ModuleCatalog, **kw) -> SlewSim:
+        """One satellite per design, wheel-unit slots packed (K = the most actuators)."""
+        K = max(d.n_actuators for d in designs)
+        mask = np.zeros((len(designs), K), dtype=bool)
+        for i, d in enumerate(designs):
+            mask[i, : d.n_actuators] = True
+        return cls(np.stack([d.I_B for d in designs]), mask, mission, modules, **kw)
+
+    def set_plants(self, idx: Tensor, I_B: Tensor, actuator_mask: Tensor) -> None:
+        """Replace the satellites ``idx`` (the learning code swaps designs between episodes)."""
+        I_B = I_B.to(self.dtype)
+        self.plant.I_B[idx] = I_B
+        self.plant.I_B_inv[idx] = torch.linalg.inv(I_B)
+        self.plant.actuator_mask[idx] = actuator_mask
 
     # ------------------------------------------------------------------ reset / observe
     def reset(self, idx: Tensor | list[int], draws: list[EpisodeDraw]) -> None:
@@ -197,7 +212,7 @@ class SlewSim:
         self.steps += 1
         phi = quat.error_angle(self.error_quaternion())
         omega_norm = self.state.omega_B.norm(dim=-1)
-        rew, in_tol, violated = reward(phi, self.phi_prev, omega_norm, m)
+        rew, in_tol, violated = reward(phi, self.phi_prev, omega_norm, m, m.episode_steps - self.steps)
         self.phi_prev = phi
         dt_c = m.control_dt_s
         acc.ret += rew

@@ -126,6 +126,16 @@ class RewardSpec(_Section):
     safety_penalty: float = Field(
         50.0, ge=0.0, le=1e4, description="Subtracted once when the rate limit is exceeded (episode ends)."
     )
+    safety_penalty_per_remaining_step: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description=(
+            "Also subtracted, on a violation, for every control step the episode had left. "
+            "At `no_progress_penalty` or more, ending the episode early is never cheaper than "
+            "holding still (a fixed -50 is, with more than 50 to 110 steps left)."
+        ),
+    )
 
 
 class Mission(_Section):

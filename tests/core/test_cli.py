@@ -53,3 +53,37 @@ def test_check_reports_readable_errors(tmp_path):
 def test_bad_flags_get_a_message_not_a_traceback():
     r = modsat("bench", "sim", "--seconds", "-1")
     assert r.returncode == 2 and "--seconds" in r.stderr and "Traceback" not in r.stderr
+
+
+
+def test_train_and_eval_commands(tmp_path):
+    from ..learning.conftest import tiny_spec
+
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(tiny_spec().model_dump_json())
+    out = tmp_path / "run"
+    r = modsat("train", str(spec_file), "--out", str(out), "--steps", "160")
+    assert r.returncode == 0, r.stderr
+    assert "policy" in r.stdout and "PD baseline" in r.stdout or "valid=False" in r.stdout
+    names = {p.name for p in out.iterdir()}
+    assert {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.json", "trajectories.json",
+            "policy.pt"} <= names
+    assert "checkpoint.pt" not in names  # removed once the run finished
+    assert json.loads((out / "spec.json").read_text())["training"]["total_env_steps"] == 160
+    r = modsat("eval", str(out), "--episodes", "2", "--json")
+    assert r.returncode == 0, r.stderr
+    report = json.loads(r.stdout)
+    assert report["episodes"] == 2 and report["policy"]["summary"]["episodes"] == 2
+
+
+def test_train_and_eval_reject_bad_input(tmp_path):
+    r = modsat("train", "--preset", "nope", "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "unknown preset" in r.stderr
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"design": {"grid_size": 11}}')
+    r = modsat("train", str(bad), "--out", str(tmp_path / "y"))
+    assert r.returncode == 2 and "design.grid_size" in r.stderr
+    r = modsat("eval", str(tmp_path / "missing"))
+    assert r.returncode == 2 and "No such file" in r.stderr
+    r = modsat("train", "--out", str(tmp_path / "z"))
+    assert r.returncode != 0 and "--preset" in r.stderr

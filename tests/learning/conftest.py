@@ -1,0 +1,35 @@
+"""Tiny specs that train in seconds, for the mechanics of training (not its quality)."""
+
+from __future__ import annotations
+
+import pytest
+
+from modsat_core.spec import JobSpec
+
+
+def tiny_spec(**over) -> JobSpec:
+    d = {
+        "name": "tiny",
+        "algorithm": "td3-codesign",
+        "seed": 3,
+        "design": {"grid_size": 2, "design_steps": 3},
+        "modules": {"torque_scale_Nm": 0.05, "actuator_model": "reaction-wheel"},
+        "mission": {"episode_steps": 12, "tolerance_deg": 1.0, "reward": {"safety_penalty_per_remaining_step": 1.0}},
+        "training": {"total_env_steps": 480, "num_envs": 8, "hidden_sizes": [16, 16], "batch_size": 32,
+                     "buffer_size": 1000, "learning_starts": 96, "train_frequency": 4, "eval_every_steps": 160,
+                     "eval_episodes": 2, "checkpoint_every_steps": 160, "device": "cpu"},
+        "ga": {"population_size": 4, "steps_per_design": 64},
+        "evaluation": {"episodes": 3, "trajectories": 1},
+    }
+    for key, val in over.items():
+        sec, _, name = key.partition("__")
+        if name:
+            d[sec][name] = val
+        else:
+            d[sec] = val
+    return JobSpec.model_validate(d)
+
+
+@pytest.fixture
+def tiny():
+    return tiny_spec

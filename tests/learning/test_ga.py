@@ -1,0 +1,56 @@
+"""The GA baseline: valid and unique designs, the survivor schedule, the env-step budget."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from modsat_core.ga import mutate, survivor_count
+from modsat_core.morphology import is_valid
+from modsat_core.train import train
+
+from .conftest import tiny_spec
+
+
+def test_ga_designs_schedule_and_budget():
+    spec = tiny_spec(algorithm="ga", training__total_env_steps=1000, ga={
+        "population_size": 5, "steps_per_design": 64, "survivor_start": 0.6, "survivor_end": 0.0,
+        "mutation_rate": 0.3})
+    result = train(spec)
+    curve = json.loads(result.artifacts()["curve.json"])
+    designs, generations = curve["designs"], curve["generations"]
+    grids = [np.asarray(d["grid"]) for d in designs]
+    assert all(is_valid(g) for g in grids)
+    assert len({g.tobytes() for g in grids}) == len(grids)  # unique
+    # Budget: every env step accounted for, and no more than the budget.
+    assert sum(d["env_steps"] for d in designs) == result.env_steps == 1000
+    assert all(d["env_steps"] <= 64 for d in designs)
+    # Schedule: linear from 0.6 to 0.0 in the share of the budget spent, at least 2 survivors.
+    assert len(generations) >= 2
+    for g in generations:
+        frac = 0.6 - 0.6 * g["budget_share"]
+        assert math.isclose(g["survivor_fraction"], frac, abs_tol=1e-12)
+        assert g["survivors"] == min(max(2, math.ceil(5 * frac)), 4)
+        assert g["survivors"] + g["children"] == 5
+    assert generations[0]["survivors"] > generations[-1]["survivors"] or generations[-1]["survivors"] == 2
+    # The best design is the one with the best fitness.
+    best = max(designs, key=lambda d: d["fitness"])
+    assert json.loads(result.artifacts()["design.json"])["grid"] == best["grid"]
+
+
+def test_survivor_count_follows_the_linear_schedule():
+    spec = tiny_spec(algorithm="ga", training__total_env_steps=1000, ga={"population_size": 12})
+    assert survivor_count(spec, 0) == (8, 0.6)  # ceil(12 * 0.6) = 8
+    n, f = survivor_count(spec, 500)
+    assert math.isclose(f, 0.3) and n == 4
+    assert survivor_count(spec, 1000)[0] == 2  # never fewer than 2
+
+
+def test_mutation_rate():
+    rng = np.random.default_rng(0)
+    g = rng.integers(0, 3, size=(10, 10, 10))
+    m = mutate(rng, g, 0.1)
+    changed = (m != g).mean()
+    assert 0.08 < changed < 0.12 and set(np.unique(m)) <= {0, 1, 2}
