@@ -15,8 +15,9 @@ It follows Evolution Gym's GA (Bhatia et al. 2021), the paper's baseline:
 * a child that is invalid, or a design already evaluated, is drawn again: every
   evaluated design is valid and unique.
 
-The run ends when the env-step budget ``training.total_env_steps`` is spent; steps of
-the curve evaluations are not counted (as for the RL run).
+The run ends when the env-step budget ``training.total_env_steps`` is spent (less than
+one batch of ``num_envs`` steps left); steps of the curve evaluations are not counted (as
+for the RL run). The budget is never exceeded.
 """
 
 from __future__ import annotations
@@ -118,7 +119,7 @@ class GARun:
         from .train import TD3Run
 
         total = self.spec.training.total_env_steps
-        while self.pending and self.used < total:
+        while self.pending and total - self.used >= self.spec.training.num_envs:
             grid = self.pending[0]
             budget = min(self.spec.ga.steps_per_design, total - self.used)
             seed = (self.spec.seed * 7919 + len(self.records)) % (2**31)
@@ -173,7 +174,7 @@ class GARun:
         while True:
             if self._evaluate_pending(on_progress, wrap, should_stop):
                 return RunResult(stopped=True, env_steps=self.used, curve=self.curve)
-            if self.used >= total:
+            if total - self.used < self.spec.training.num_envs:  # not one more batch of steps
                 break
             self._next_generation()
         on_progress({"env_steps": self.used, "total_env_steps": total, "updates": 0, "phase": "evaluating",

@@ -6,7 +6,9 @@ checkpoints and stopping go through the three callbacks, and the finished run's 
 back as bytes from :meth:`RunResult.artifacts`.
 
 Environment steps are MDP steps: a design step and a control step count one each, per
-parallel episode. Learning-curve and final evaluations are not counted.
+parallel episode. Learning-curve and final evaluations are not counted. Steps are taken in
+batches of ``training.num_envs``; a run never exceeds its budget (it stops before a batch
+that would), so it may end up to ``num_envs - 1`` steps short of it.
 """
 
 from __future__ import annotations
@@ -325,7 +327,8 @@ class TD3Run:
         N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
         progress_every = max(B, total // 200)
         next_progress = (self.env_steps // progress_every + 1) * progress_every
-        while self.env_steps < total:
+        # Steps come in batches of B; a batch that would overrun the budget is not taken.
+        while self.env_steps + B <= total:
             if should_stop():
                 on_checkpoint(self.state_dict())
                 return True
@@ -343,15 +346,18 @@ class TD3Run:
                     self.update_credit -= 1.0
                     self._update()
             point = None
-            if self.env_steps >= self.next_eval or self.env_steps >= total:
+            last = self.env_steps + B > total
+            if self.env_steps >= self.next_eval or last:
                 point = self.evaluate_now()
                 self.next_eval = (self.env_steps // self.t.eval_every_steps + 1) * self.t.eval_every_steps
             if point is not None or self.env_steps >= next_progress:
                 on_progress(self.progress(total, point))
                 next_progress = (self.env_steps // progress_every + 1) * progress_every
-            if self.env_steps >= self.next_ckpt and self.env_steps < total:
+            if self.env_steps >= self.next_ckpt and not last:
                 on_checkpoint(self.state_dict())
                 self.next_ckpt = (self.env_steps // self.t.checkpoint_every_steps + 1) * self.t.checkpoint_every_steps
+        if self.best is None:  # a budget smaller than one batch: the untrained policy
+            on_progress(self.progress(total, self.evaluate_now()))
         return False
 
     def _update(self) -> None:

@@ -25,7 +25,8 @@ def test_ga_designs_schedule_and_budget():
     assert all(is_valid(g) for g in grids)
     assert len({g.tobytes() for g in grids}) == len(grids)  # unique
     # Budget: every env step accounted for, and no more than the budget.
-    assert sum(d["env_steps"] for d in designs) == result.env_steps == 1000
+    assert sum(d["env_steps"] for d in designs) == result.env_steps
+    assert 1000 - 8 < result.env_steps <= 1000  # whole batches of num_envs = 8, never over
     assert all(d["env_steps"] <= 64 for d in designs)
     # Schedule: linear from 0.6 to 0.0 in the share of the budget spent, at least 2 survivors.
     assert len(generations) >= 2

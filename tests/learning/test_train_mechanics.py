@@ -42,6 +42,14 @@ def test_run_writes_every_output():
     assert any(p.get("eval") for p in progress)
 
 
+def test_budget_is_never_exceeded():
+    # 8 parallel episodes: 100 steps = 12 batches (96), the 13th would overrun.
+    r = train(tiny_spec(training__total_env_steps=100, training__learning_starts=16))
+    assert r.env_steps == 96 and r.curve[-1]["env_steps"] == 96
+    r = train(tiny_spec(training__total_env_steps=5))  # less than one batch: untrained, evaluated
+    assert r.env_steps == 0 and len(r.curve) == 1 and "policy.pt" in r.artifacts()
+
+
 def test_same_seed_same_curve_on_cpu():
     a = train(tiny_spec()).curve
     b = train(tiny_spec()).curve
