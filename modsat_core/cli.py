@@ -257,7 +257,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_service_commands(sub) -> None:
     """`serve` and `worker` live with the service (server/, worker/), in the same distribution."""
-    # SERVICE-COMMANDS: server.cli.add_commands(sub) is wired here once server/ exists.
+    from server.cli import add_commands
+
+    add_commands(sub)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,199 @@
+"""The FastAPI application: ``create_app()`` (uvicorn: ``server.app:create_app --factory``).
+
+Everything lives under ``/api``; ``/`` is a small page that lists jobs through the API.
+Nothing a client sends may produce a 5xx: bodies are size-limited before they are read,
+parsed by hand (400 / 422 with messages that name the field), ids out of range are 404.
+"""
+
+from __future__ import annotations
+
+import logging
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import APIRouter, FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.openapi.utils import get_openapi
+from fastapi.responses import HTMLResponse, JSONResponse
+from sqlalchemy.exc import OperationalError, SQLAlchemyError
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+import modsat_core
+from modsat_core.presets import PRESETS
+from modsat_core.spec import JobSpec
+from worker.store import JobStore
+
+from .deps import StoreDep
+from .page import INDEX_HTML
+from .routes_jobs import router as jobs_router
+from .schemas import Health, PresetInfo, PresetSubmission
+from .settings import ServerSettings
+
+log = logging.getLogger("modsat.server")
+
+
+class BodySizeLimit:
+    """413 for a request body over ``max_bytes``, checked before anything parses it.
+
+    A declared Content-Length is checked first; a chunked body is read (at most
+    ``max_bytes`` + one chunk) and then replayed to the application."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int):
+        self.app, self.max_bytes = app, max_bytes
+
+    async def _reject(self, send: Send, status: int, detail: str) -> None:
+        await JSONResponse({"detail": detail}, status_code=status)({"type": "http"}, _no_receive, send)
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        too_big = f"request body larger than {self.max_bytes} bytes (MODSAT_MAX_BODY_BYTES)"
+        length = dict(scope["headers"]).get(b"content-length")
+        if length is not None:
+            if not length.strip().isdigit():
+                await self._reject(send, 400, "Content-Length is not a number")
+                return
+            if int(length) > self.max_bytes:
+                await self._reject(send, 413, too_big)
+                return
+        chunks, size, more = [], 0, True
+        while more:
+            message = await receive()
+            if message["type"] == "http.disconnect":
+                return
+            chunk = message.get("body", b"")
+            size += len(chunk)
+            if size > self.max_bytes:
+                await self._reject(send, 413, too_big)
+                return
+            chunks.append(chunk)
+            more = message.get("more_body", False)
+        body, replayed = b"".join(chunks), False
+
+        async def replay() -> Message:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()  # after the body: wait for the disconnect, as usual
+
+        await self.app(scope, replay, send)
+
+
+async def _no_receive() -> Message:
+    return {"type": "http.disconnect"}
+
+
+def _readable(err: dict[str, Any]) -> str:
+    path = ".".join(str(p) for p in err.get("loc", ())) or "(request)"
+    shown = err.get("input")
+    got = "" if shown is None or isinstance(shown, (dict, list)) else f"; got {str(shown)[:80]!r}"
+    return f"{path}: {err.get('msg', 'invalid')}{got}"
+
+
+def _install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(RequestValidationError)
+    async def _validation(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = [{"loc": list(e.get("loc", ())), "msg": _readable(e), "type": str(e.get("type", ""))}
+                  for e in exc.errors()]
+        return JSONResponse({"detail": errors, "messages": [e["msg"] for e in errors]}, status_code=422)
+
+    @app.exception_handler(OperationalError)
+    async def _db_down(_request: Request, exc: OperationalError) -> JSONResponse:
+        log.error("database unavailable: %s", exc)
+        return JSONResponse({"detail": "the job database is unavailable; try again shortly"}, status_code=503,
+                            headers={"Retry-After": "5"})
+
+    @app.exception_handler(SQLAlchemyError)
+    async def _db_error(_request: Request, exc: SQLAlchemyError) -> JSONResponse:
+        log.exception("database error", exc_info=exc)
+        return JSONResponse({"detail": "database error; see the server log"}, status_code=500)
+
+
+def _misc_router() -> APIRouter:
+    r = APIRouter(prefix="/api")
+
+    @r.get("/presets", response_model=list[PresetInfo], tags=["specs"])
+    def list_presets() -> list[PresetInfo]:
+        """The named specs. Submit one with `{"preset": NAME}`."""
+        return [PresetInfo(name=n, algorithm=s.algorithm, grid_size=s.design.grid_size,
+                           total_env_steps=s.training.total_env_steps, url=f"/api/presets/{n}")
+                for n, s in PRESETS.items()]
+
+    @r.get("/presets/{name}", response_model=JobSpec, tags=["specs"], responses={404: {"description": "Unknown"}})
+    def get_preset(name: str) -> JobSpec:
+        """One preset as a whole JobSpec (edit it and POST it to /api/jobs)."""
+        if name not in PRESETS:
+            raise HTTPException(404, f"no preset named {name!r}; known: {', '.join(PRESETS)}")
+        return PRESETS[name]
+
+    @r.get("/schema", tags=["specs"])
+    def spec_schema() -> dict[str, Any]:
+        """The JSON schema of JobSpec (every field, its bounds and its description)."""
+        return JobSpec.model_json_schema()
+
+    @r.get("/health", response_model=Health, tags=["service"], responses={503: {"description": "Database down"}})
+    def health(store: StoreDep) -> Health:
+        """Database reachable, jobs per status, live workers."""
+        workers = store.live_workers()
+        return Health(status="ok", version=modsat_core.__version__, database=store.backend,
+                      jobs=store.status_counts(),
+                      workers=[{k: w[k] for k in ("id", "hostname", "pid", "runner", "job_id")} for w in workers])
+
+    return r
+
+
+def _openapi(app: FastAPI):
+    """The generated schema, plus JobSpec (the submit body is read by hand, so FastAPI does not see it)."""
+
+    def build() -> dict[str, Any]:
+        if app.openapi_schema:
+            return app.openapi_schema
+        schema = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes)
+        comps = schema.setdefault("components", {}).setdefault("schemas", {})
+        spec_schema = JobSpec.model_json_schema(ref_template="#/components/schemas/{model}")
+        comps.update(spec_schema.pop("$defs", {}))
+        comps["JobSpec"] = spec_schema
+        comps["PresetSubmission"] = PresetSubmission.model_json_schema(ref_template="#/components/schemas/{model}")
+        app.openapi_schema = schema
+        return schema
+
+    return build
+
+
+def create_app(settings: ServerSettings | None = None, store: JobStore | None = None) -> FastAPI:
+    """The API. ``store`` defaults to one opened from ``settings`` (created tables included)."""
+    settings = settings or ServerSettings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        own = store is None
+        app.state.store = store or JobStore(settings.resolved_db_url, busy_timeout_s=settings.sqlite_busy_timeout_s)
+        app.state.store.create_schema()
+        try:
+            yield
+        finally:
+            if own:
+                app.state.store.dispose()
+
+    app = FastAPI(
+        title="modsat job service", version=modsat_core.__version__, lifespan=lifespan,
+        description="Submit co-design training runs of modular satellites, follow them, download the results. "
+        "See docs/service.md.",
+        openapi_url="/api/openapi.json", docs_url="/api/docs", redoc_url=None,
+    )
+    app.state.settings = settings
+    if store is not None:
+        app.state.store = store
+    _install_error_handlers(app)
+    app.include_router(jobs_router)
+    app.include_router(_misc_router())
+
+    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
+    def index() -> str:
+        return INDEX_HTML
+
+    app.openapi = _openapi(app)
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    return app

@@ -1,0 +1,274 @@
+"""Benchmarks of the job service (not tests): ``python -m server.bench [api] [queue] [--json]``.
+
+* ``api``: p50 / p99 latency of ``GET /api/jobs`` with 1,000 jobs stored, under 50
+  concurrent clients on loopback (uvicorn in a subprocess, one process, as ``modsat serve``
+  runs it; the clients run on the same machine and share its cores).
+* ``queue``: jobs per second that 4 worker processes take from a queue of 1,000 no-op
+  jobs: ``claim`` (the atomic claim alone) and ``cycle`` (claim + heartbeat + complete,
+  the whole queue life of a job without its training); plus ``workers``: real
+  ``python -m worker --runner noop`` processes, which also start a training child
+  process per job.
+
+SQLite is a file in a temporary directory; PostgreSQL is a database created for the run on
+the server of ``--pg`` (default ``postgresql://postgres@127.0.0.1:5432/postgres``), skipped
+with the reason if it cannot be reached.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import multiprocessing as mp
+import os
+import platform
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+
+import httpx
+
+from worker.store import JobStore
+
+DEFAULT_PG = "postgresql://postgres@127.0.0.1:5432/postgres"
+
+
+def _spec_json() -> str:
+    from modsat_core.presets import get_preset
+
+    return get_preset("quick").model_copy(update={"name": "bench"}).model_dump_json()
+
+
+def _fill(store: JobStore, n: int, total_env_steps: int = 30_000) -> None:
+    text = _spec_json()
+    for _ in range(n):
+        store.submit(text, name="bench", algorithm="td3-codesign", total_env_steps=total_env_steps, max_attempts=3)
+
+
+class _PgDatabase:
+    """A database created for the benchmark and dropped afterwards."""
+
+    def __init__(self, admin_url: str):
+        import psycopg
+
+        self.admin_url, self.name = admin_url, f"modsat_bench_{os.getpid()}_{uuid.uuid4().hex[:6]}"
+        with psycopg.connect(admin_url, autocommit=True, connect_timeout=3) as conn:
+            conn.execute(f'CREATE DATABASE "{self.name}"')
+        self.url = f"{admin_url.rsplit('/', 1)[0]}/{self.name}"
+
+    def drop(self) -> None:
+        import psycopg
+
+        with psycopg.connect(self.admin_url, autocommit=True, connect_timeout=3) as conn:
+            conn.execute(f'DROP DATABASE IF EXISTS "{self.name}" WITH (FORCE)')
+
+
+def _databases(which: list[str], pg_admin: str, tmp: Path):
+    """Yield (kind, url, cleanup) for each requested backend, or (kind, None, reason)."""
+    for kind in which:
+        if kind == "sqlite":
+            path = tmp / f"bench-{uuid.uuid4().hex[:6]}.db"
+            yield kind, f"sqlite:///{path}", lambda: None
+        else:
+            try:
+                db = _PgDatabase(pg_admin)
+            except Exception as exc:  # noqa: BLE001 - report and skip
+                yield kind, None, f"skipped: PostgreSQL not reachable at {pg_admin}: {exc}"
+                continue
+            yield kind, db.url, db.drop
+
+
+# ----------------------------------------------------------------------------- API latency
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+async def _hammer(base: str, clients: int, requests: int, path: str) -> list[float]:
+    latencies: list[float] = []
+    remaining = requests
+    limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
+    async with httpx.AsyncClient(base_url=base, limits=limits, timeout=60) as client:
+
+        async def one_client() -> None:
+            nonlocal remaining
+            while remaining > 0:
+                remaining -= 1
+                t0 = time.perf_counter()
+                r = await client.get(path)
+                latencies.append(time.perf_counter() - t0)
+                if r.status_code != 200:
+                    raise RuntimeError(f"GET {path}: {r.status_code} {r.text[:200]}")
+
+        await asyncio.gather(*(one_client() for _ in range(clients)))
+    return latencies
+
+
+def bench_api(url: str, *, jobs: int = 1000, clients: int = 50, requests: int = 3000) -> dict:
+    store = JobStore(url)
+    store.create_schema()
+    _fill(store, jobs)
+    store.dispose()
+    port = _free_port()
+    base = f"http://127.0.0.1:{port}"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "uvicorn", "server.app:create_app", "--factory", "--port", str(port),
+         "--log-level", "warning", "--timeout-keep-alive", "30"],
+        env={**os.environ, "MODSAT_DB_URL": url},
+    )
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                if httpx.get(f"{base}/api/health", timeout=2).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError("the API server did not start")
+            time.sleep(0.2)
+        asyncio.run(_hammer(base, clients, 200, "/api/jobs"))  # warm up
+        cpu0 = _cpu_seconds(proc.pid)
+        t0 = time.perf_counter()
+        lat = asyncio.run(_hammer(base, clients, requests, "/api/jobs"))
+        wall = time.perf_counter() - t0
+        server_cpu = _cpu_seconds(proc.pid) - cpu0
+    finally:
+        proc.terminate()
+        proc.wait(15)
+    lat_ms = sorted(x * 1000 for x in lat)
+    q = statistics.quantiles(lat_ms, n=100)
+    return {"endpoint": "GET /api/jobs (limit 50, total count)", "jobs_stored": jobs, "clients": clients,
+            "requests": len(lat_ms), "p50_ms": round(q[49], 1), "p90_ms": round(q[89], 1),
+            "p99_ms": round(q[98], 1), "max_ms": round(lat_ms[-1], 1), "requests_per_s": round(len(lat_ms) / wall, 1),
+            "server_cpu_ms_per_request": round(1000 * server_cpu / len(lat_ms), 2) if server_cpu else None,
+            "load_average_1min": round(os.getloadavg()[0], 2)}
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (Linux /proc; 0 elsewhere)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return 0.0
+
+
+# ----------------------------------------------------------------------------- queue throughput
+
+
+def _claimer(url: str, mode: str, start, out) -> None:
+    store = JobStore(url)
+    name = f"bench-{os.getpid()}"
+    n = 0
+    start.wait()
+    while (c := store.claim(name, lease_s=60)) is not None:
+        if mode == "cycle":
+            store.heartbeat(c, lease_s=60)
+            store.complete(c, files={}, summary=None, env_steps=0, attempt_seconds=0.0)
+        n += 1
+    out.put(n)
+    store.dispose()
+
+
+def bench_claims(url: str, *, jobs: int = 1000, workers: int = 4, mode: str = "claim") -> dict:
+    store = JobStore(url)
+    store.create_schema()
+    _fill(store, jobs)
+    ctx = mp.get_context("spawn")
+    start, out = ctx.Event(), ctx.Queue()
+    procs = [ctx.Process(target=_claimer, args=(url, mode, start, out)) for _ in range(workers)]
+    for p in procs:
+        p.start()
+    time.sleep(2.0)  # let every process import and connect before the clock starts
+    t0 = time.perf_counter()
+    start.set()
+    counts = [out.get(timeout=600) for _ in procs]
+    wall = time.perf_counter() - t0
+    for p in procs:
+        p.join(30)
+    counts_db = store.status_counts()
+    store.dispose()
+    if sum(counts) != jobs:
+        raise RuntimeError(f"claimed {sum(counts)} of {jobs} jobs")
+    return {"mode": mode, "jobs": jobs, "workers": workers, "seconds": round(wall, 3),
+            "jobs_per_s": round(jobs / wall, 1), "per_worker": counts, "final_status": counts_db}
+
+
+def bench_worker_processes(url: str, *, jobs: int = 100, workers: int = 4) -> dict:
+    """Real workers with the no-op runner: each job also spawns its training child process."""
+    store = JobStore(url)
+    store.create_schema()
+    _fill(store, jobs, total_env_steps=1)
+    env = {**os.environ, "MODSAT_POLL_S": "0.05", "MODSAT_RUNNER": "noop"}
+    procs = [subprocess.Popen([sys.executable, "-m", "worker", "--db", url, "--idle-exit", "1.0"], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for _ in range(workers)]
+    t0 = time.perf_counter()
+    while store.status_counts().get("succeeded", 0) < jobs:
+        if all(p.poll() is not None for p in procs):
+            raise RuntimeError(f"workers exited early: {store.status_counts()}")
+        time.sleep(0.05)
+    wall = time.perf_counter() - t0
+    for p in procs:
+        p.wait(30)
+    store.dispose()
+    return {"mode": "worker processes, noop runner (child process per job)", "jobs": jobs, "workers": workers,
+            "seconds": round(wall, 2), "jobs_per_s": round(jobs / wall, 1)}
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m server.bench", description=__doc__.split("\n\n")[0])
+    p.add_argument("what", nargs="*", help="api and/or queue (default: both)")
+    p.add_argument("--db", nargs="+", choices=["sqlite", "postgresql"], default=["sqlite", "postgresql"])
+    p.add_argument("--pg", default=os.environ.get("MODSAT_BENCH_PG_URL", DEFAULT_PG), metavar="URL",
+                   help="admin URL of a PostgreSQL server (a database is created and dropped)")
+    p.add_argument("--jobs", type=int, default=1000)
+    p.add_argument("--clients", type=int, default=50)
+    p.add_argument("--requests", type=int, default=3000)
+    p.add_argument("--workers", type=int, default=4)
+    p.add_argument("--json", action="store_true", help="print only the JSON report")
+    args = p.parse_args(argv)
+    args.what = args.what or ["api", "queue"]
+    if set(args.what) - {"api", "queue"}:
+        p.error("what to measure: api and/or queue")
+
+    report: dict = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                                "platform": platform.platform()}, "results": {}}
+    with tempfile.TemporaryDirectory(prefix="modsat-bench-") as tmp:
+        for kind, url, cleanup in _databases(args.db, args.pg, Path(tmp)):
+            res: dict = {}
+            report["results"][kind] = res
+            if url is None:
+                res["error"] = cleanup
+                continue
+            try:
+                if "api" in args.what:
+                    res["api"] = bench_api(url, jobs=args.jobs, clients=args.clients, requests=args.requests)
+                    JobStore(url).drop_schema()
+                if "queue" in args.what:
+                    for mode in ("claim", "cycle"):
+                        res[f"queue_{mode}"] = bench_claims(url, jobs=args.jobs, workers=args.workers, mode=mode)
+                        JobStore(url).drop_schema()
+                    res["queue_worker_processes"] = bench_worker_processes(url, jobs=40, workers=args.workers)
+                    JobStore(url).drop_schema()
+            finally:
+                cleanup()
+            if not args.json:
+                print(f"{kind}: {json.dumps(res)}", file=sys.stderr, flush=True)
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

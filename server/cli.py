@@ -1,0 +1,115 @@
+"""``modsat serve`` and ``modsat worker`` (wired into modsat_core/cli.py by ``add_commands``)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from pydantic import ValidationError
+
+
+def add_commands(sub) -> None:
+    """Add ``serve`` and ``worker`` to the ``modsat`` sub-command parser ``sub``."""
+    from worker.args import add_worker_arguments
+
+    s = sub.add_parser("serve", help="run the job service on this machine: REST API + N local workers")
+    s.add_argument("--workers", type=int, default=1, metavar="N", help="local worker processes (default 1)")
+    s.add_argument("--db", metavar="URL", help="job store URL (default: SQLite file in --data-dir)")
+    s.add_argument("--data-dir", help="directory of the default SQLite database (default ./modsat-data)")
+    s.add_argument("--host", help="address to listen on (default 127.0.0.1)")
+    s.add_argument("--port", type=int, help="port to listen on (default 8000)")
+    s.add_argument("--runner", help="what workers run: train (default), or noop / simulated / raise for tests")
+    s.set_defaults(func=_cmd_serve)
+
+    w = sub.add_parser("worker", help="run one worker that pulls jobs from the job store at --db URL")
+    add_worker_arguments(w)
+    w.set_defaults(func=_cmd_worker)
+
+
+def _cmd_worker(args: argparse.Namespace) -> int:
+    from worker.main import run_worker
+
+    return run_worker(args)
+
+
+def _stop_workers(procs: list[subprocess.Popen], grace_s: float) -> None:
+    """SIGTERM (the training checkpoints, the job is requeued), then SIGKILL after ``grace_s``."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + grace_s
+    try:
+        for p in procs:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+    except (subprocess.TimeoutExpired, KeyboardInterrupt):
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)  # a second signal: stop without waiting for the training
+        time.sleep(1.0)
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+            p.wait()
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from worker.store import JobStore
+
+    from .app import create_app
+    from .settings import ServerSettings
+
+    if args.workers < 0 or args.workers > 256:
+        print("modsat serve: --workers must be between 0 and 256", file=sys.stderr)
+        return 2
+    given = {"db_url": args.db, "data_dir": args.data_dir, "host": args.host, "port": args.port,
+             "runner": args.runner}
+    try:
+        settings = ServerSettings(**{k: v for k, v in given.items() if v is not None})
+    except ValidationError as exc:
+        print(f"modsat serve: invalid setting: {exc}", file=sys.stderr)
+        return 2
+    url = settings.resolved_db_url
+    try:
+        store = JobStore(url, busy_timeout_s=settings.sqlite_busy_timeout_s)
+    except Exception as exc:  # noqa: BLE001 - a bad URL: say so and stop
+        print(f"modsat serve: {exc}", file=sys.stderr)
+        return 2
+    try:
+        store.create_schema()  # once, before the workers start
+    except Exception as exc:  # noqa: BLE001 - say what is wrong with the database and stop
+        print(f"modsat serve: cannot open the job store {store.url_for_humans}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        store.dispose()
+
+    shown_host = "127.0.0.1" if settings.host in ("0.0.0.0", "::") else settings.host
+    base = f"http://{shown_host}:{settings.port}"
+    print(f"modsat: job store  {store.url_for_humans}", flush=True)
+    print(f"modsat: API        {base}/api  (OpenAPI: {base}/api/openapi.json)", flush=True)
+    print(f"modsat: page       {base}/", flush=True)
+    print(f"modsat: {args.workers} local worker(s); add more anywhere with: modsat worker --db URL", flush=True)
+
+    env = dict(os.environ, MODSAT_RUNNER=settings.runner)
+    procs = [
+        subprocess.Popen([sys.executable, "-m", "worker", "--db", url, "--exit-with-parent", str(os.getpid())],
+                         env=env, start_new_session=True)  # Ctrl-C reaches us; we stop them in order
+        for _ in range(args.workers)
+    ]
+    server = uvicorn.Server(uvicorn.Config(create_app(settings), host=settings.host, port=settings.port,
+                                           log_level="info", timeout_graceful_shutdown=3))
+    try:
+        server.run()
+    except (KeyboardInterrupt, SystemExit):  # uvicorn re-raises the Ctrl-C it handled, exits if it cannot bind
+        pass
+    finally:
+        if procs:
+            print(f"modsat: stopping {len(procs)} worker(s)...", flush=True)
+            _stop_workers(procs, settings.cancel_grace_s + 5.0)
+    print("modsat: stopped", flush=True)
+    return 0 if server.started else 1

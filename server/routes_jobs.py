@@ -1,0 +1,230 @@
+"""``/api/jobs``: submit, list, get, metrics, events, cancel, artefacts. Routes stay short:
+the SQL is in worker/store.py."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+import time
+from typing import Annotated
+
+from fastapi import APIRouter, Header, HTTPException, Query, Request, Response
+from fastapi.responses import JSONResponse, StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
+from worker.db import TERMINAL_STATUSES
+
+from .deps import SettingsDep, StoreDep, WriteAccess
+from .schemas import (
+    ArtifactInfo,
+    CancelResult,
+    JobDetail,
+    JobList,
+    JobStatus,
+    MetricsPage,
+    artifact_info,
+    job_detail,
+    job_summary,
+    metrics_point,
+)
+from .submit import BadRequest, Invalid, decode_json, spec_from_body
+
+router = APIRouter(prefix="/api/jobs", tags=["jobs"])
+
+_SUBMIT_BODY = {
+    "required": True,
+    "content": {"application/json": {
+        "schema": {"oneOf": [{"$ref": "#/components/schemas/JobSpec"},
+                             {"$ref": "#/components/schemas/PresetSubmission"}]},
+        "examples": {
+            "preset": {"summary": "A preset", "value": {"preset": "quick"}},
+            "preset-overrides": {"summary": "A preset with changes",
+                                 "value": {"preset": "quick", "overrides": {"seed": 7}}},
+        },
+    }},
+}
+_ERRORS = {404: {"description": "Unknown job"}}
+
+
+def _unknown(job_id: int) -> HTTPException:
+    return HTTPException(404, f"no job with id {job_id}")
+
+
+def _detail(store, job_id: int) -> JobDetail | None:
+    row = store.get_job(job_id)
+    if row is None:
+        return None
+    return job_detail(row, store.latest_metrics(job_id), store.list_attempts(job_id))
+
+
+@router.post("", status_code=201, response_model=JobDetail, dependencies=[WriteAccess], openapi_extra={
+    "requestBody": _SUBMIT_BODY}, responses={400: {"description": "Body is not JSON"},
+                                            401: {"description": "Missing or wrong bearer token"},
+                                            413: {"description": "Body too large"},
+                                            422: {"description": "Invalid spec; `messages` name each field"}})
+async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
+    """Queue a training run. The body is a JobSpec, or `{"preset": NAME, "overrides": {...}}`."""
+    try:
+        spec = spec_from_body(decode_json(await request.body()))
+    except BadRequest as exc:
+        raise HTTPException(400, str(exc)) from None
+    except Invalid as exc:
+        return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
+
+    def create() -> JobDetail:
+        job_id = store.submit(spec.model_dump_json(), name=spec.name, algorithm=spec.algorithm,
+                              total_env_steps=spec.training.total_env_steps, max_attempts=settings.max_attempts)
+        return _detail(store, job_id)
+
+    job = await run_in_threadpool(create)
+    return JSONResponse(job.model_dump(mode="json"), status_code=201, headers={"Location": job.url})
+
+
+@router.get("", response_model=JobList)
+def list_jobs(
+    store: StoreDep,
+    status: Annotated[list[JobStatus] | None, Query(description="Only jobs in these states (repeatable).")] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
+) -> JobList:
+    """Jobs, newest first, one page at a time."""
+    total, rows = store.list_jobs(statuses=list(status) if status else None, limit=limit, offset=offset)
+    nxt = offset + len(rows) if offset + len(rows) < total else None
+    return JobList(total=total, limit=limit, offset=offset, next_offset=nxt, items=[job_summary(r) for r in rows])
+
+
+@router.get("/{job_id}", response_model=JobDetail, responses=_ERRORS)
+def get_job(job_id: int, store: StoreDep) -> JobDetail:
+    """Status, progress, latest metrics, evaluation summary, error and attempts of one job."""
+    job = _detail(store, job_id)
+    if job is None:
+        raise _unknown(job_id)
+    return job
+
+
+@router.get("/{job_id}/metrics", response_model=MetricsPage, responses=_ERRORS)
+def get_metrics(
+    job_id: int,
+    store: StoreDep,
+    after: Annotated[int, Query(ge=0, le=2**31 - 1, description="Only rows with seq > after.")] = 0,
+    limit: Annotated[int, Query(ge=1, le=5000)] = 1000,
+) -> MetricsPage:
+    """Progress rows in order; poll with `after` = the `last_seq` of the previous answer."""
+    state = store.job_state(job_id)
+    if state is None:
+        raise _unknown(job_id)
+    rows = store.metrics_after(job_id, after, limit)
+    return MetricsPage(job_id=job_id, status=state[0], after=after, last_seq=rows[-1]["seq"] if rows else after,
+                       more=len(rows) == limit, items=[metrics_point(r) for r in rows])
+
+
+def _sse(event: str, data: str, event_id: int | None = None) -> str:
+    head = f"id: {event_id}\n" if event_id is not None else ""
+    return f"{head}event: {event}\ndata: {data}\n\n"
+
+
+@router.get("/{job_id}/events", responses={**_ERRORS, 200: {"content": {"text/event-stream": {}},
+                                                               "description": "Server-sent events"}})
+async def job_events(
+    job_id: int,
+    request: Request,
+    store: StoreDep,
+    settings: SettingsDep,
+    after: Annotated[int, Query(ge=0, le=2**31 - 1, description="Start after this metrics seq.")] = 0,
+    last_event_id: Annotated[str | None, Header(include_in_schema=False)] = None,
+) -> StreamingResponse:
+    """A server-sent-events stream: `metrics` events (id = seq), `status` events when the
+    status changes, and a final `end` event when the job has ended. Reconnecting clients
+    send `Last-Event-ID` (or `after`) and get only what they missed."""
+    state = await run_in_threadpool(store.job_state, job_id)
+    if state is None:
+        raise _unknown(job_id)
+    if last_event_id and last_event_id.strip().isdigit():
+        after = max(after, min(int(last_event_id.strip()), 2**31 - 1))
+
+    async def stream():
+        last, shown = after, None
+        t_end = time.monotonic() + settings.sse_max_s
+        next_keepalive = time.monotonic() + settings.sse_keepalive_s
+        yield "retry: 2000\n\n"
+        while True:
+            rows = await run_in_threadpool(store.metrics_after, job_id, last, 500)
+            for r in rows:
+                last = r["seq"]
+                yield _sse("metrics", metrics_point(r).model_dump_json(), last)
+            if len(rows) == 500:
+                continue
+            row = await run_in_threadpool(store.get_job, job_id)
+            if row is None:
+                yield _sse("end", json.dumps({"id": job_id, "status": "deleted"}))
+                return
+            if (row["status"], bool(row["cancel_requested"])) != shown:
+                shown = (row["status"], bool(row["cancel_requested"]))
+                yield _sse("status", job_summary(row).model_dump_json())
+            if row["status"] in TERMINAL_STATUSES and row["last_seq"] <= last:
+                yield _sse("end", json.dumps({"id": job_id, "status": row["status"], "last_seq": last}))
+                return
+            now = time.monotonic()
+            if now >= t_end:
+                yield _sse("timeout", json.dumps({"id": job_id, "last_seq": last}))
+                return
+            if now >= next_keepalive:
+                next_keepalive = now + settings.sse_keepalive_s
+                yield ": keep-alive\n\n"
+            if await request.is_disconnected():
+                return
+            await asyncio.sleep(settings.sse_poll_s)
+
+    return StreamingResponse(stream(), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
+
+
+@router.post("/{job_id}/cancel", response_model=CancelResult, dependencies=[WriteAccess],
+             responses={**_ERRORS, 202: {"description": "Running job: the worker stops it"},
+                        401: {"description": "Missing or wrong bearer token"},
+                        409: {"description": "The job has already ended"}})
+def cancel_job(job_id: int, store: StoreDep, response: Response) -> CancelResult:
+    """Cancel a queued job (at once) or a running one (its worker stops it within a heartbeat)."""
+    outcome = store.request_cancel(job_id)
+    if outcome is None:
+        raise _unknown(job_id)
+    if outcome in ("succeeded", "failed"):
+        raise HTTPException(409, f"job {job_id} has already {outcome}; there is nothing to cancel")
+    messages = {
+        "stopped": f"job {job_id} was queued and is now cancelled",
+        "requested": f"job {job_id} is running; its worker has been asked to stop it",
+    }
+    if outcome == "requested":
+        response.status_code = 202
+    return CancelResult(message=messages.get(outcome, f"job {job_id} is already cancelled"),
+                        job=_detail(store, job_id))
+
+
+_SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
+
+
+@router.get("/{job_id}/artifacts", response_model=list[ArtifactInfo], responses=_ERRORS)
+def list_artifacts(job_id: int, store: StoreDep) -> list[ArtifactInfo]:
+    """Files of the job: outputs of a finished run (policy, export, design, evaluation,
+    trajectories, curve) and, while it runs, its latest checkpoint."""
+    if store.job_state(job_id) is None:
+        raise _unknown(job_id)
+    return [artifact_info(job_id, r) for r in store.list_artifacts(job_id)]
+
+
+@router.get("/{job_id}/artifacts/{name}", responses={
+    **_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "The file"}})
+def download_artifact(job_id: int, name: str, store: StoreDep) -> StreamingResponse:
+    """Download one file. Only names in the job's list exist; anything else is 404."""
+    info = store.artifact_info(job_id, name)
+    if info is None:
+        if store.job_state(job_id) is None:
+            raise _unknown(job_id)
+        raise HTTPException(404, f"job {job_id} has no artefact named {name!r}; see /api/jobs/{job_id}/artifacts")
+    filename = _SAFE_NAME.sub("_", f"modsat-job-{job_id}-{info['name']}")
+    return StreamingResponse(
+        store.iter_artifact(job_id, info["name"], int(info["size"]), info["sha256"]), media_type=info["content_type"],
+        headers={"Content-Length": str(info["size"]), "ETag": f'"{info["sha256"]}"',
+                 "Content-Disposition": f'attachment; filename="{filename}"'},
+    )

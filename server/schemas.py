@@ -1,0 +1,194 @@
+"""The REST API's public models, and the conversion of store rows into them."""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime, timezone
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+
+
+def _time(t: float | None) -> datetime | None:
+    return None if t is None else datetime.fromtimestamp(float(t), tz=timezone.utc)
+
+
+def _json(text: str | None) -> Any:
+    return None if text is None else json.loads(text)
+
+
+class PresetSubmission(BaseModel):
+    """Submit a named preset, optionally with some fields changed."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
+        {"preset": "quick"},
+        {"preset": "quick", "overrides": {"seed": 3, "training": {"total_env_steps": 10000}}},
+    ]})
+
+    preset: str = Field(description="Name of a preset (GET /api/presets).")
+    overrides: dict[str, Any] = Field(
+        default_factory=dict, description="Fields of the spec to change, nested like the spec; merged into the preset."
+    )
+
+
+class Progress(BaseModel):
+    env_steps: int = Field(description="Environment steps done (as last reported by the training).")
+    total_env_steps: int
+    fraction: float = Field(description="env_steps / total_env_steps, between 0 and 1.")
+    phase: str | None = Field(description="starting | training | evaluating | done, or null.")
+    checkpoint_env_steps: int | None = Field(description="Where a resumed attempt starts from.")
+    run_seconds: float = Field(description="Wall time of the finished attempts.")
+
+
+class JobSummary(BaseModel):
+    """A job as lists show it."""
+
+    id: int
+    name: str | None
+    algorithm: str
+    status: JobStatus
+    created_at: datetime
+    updated_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    attempt: int = Field(description="Attempts started so far (also the fencing token of the current one).")
+    failures: int = Field(description="Failed attempts (error, crash, lost lease).")
+    max_attempts: int = Field(description="Failed attempts allowed before the job is `failed`.")
+    cancel_requested: bool
+    worker_id: str | None
+    lease_expires_at: datetime | None
+    progress: Progress
+    last_eval: dict[str, Any] | None = Field(description="The latest learning-curve point.")
+    error: str | None
+    url: str
+
+
+class MetricsPoint(BaseModel):
+    """One progress report: the training's dict plus the row's bookkeeping."""
+
+    model_config = ConfigDict(extra="allow")
+
+    seq: int = Field(description="Per-job sequence number, 1, 2, 3, ...")
+    attempt: int
+    time: datetime
+    env_steps: int
+
+
+class AttemptInfo(BaseModel):
+    attempt: int
+    worker_id: str
+    started_at: datetime
+    ended_at: datetime | None
+    outcome: str = Field(description="running | succeeded | failed | crashed | lease-expired | cancelled | released")
+    resumed_from_env_steps: int | None
+    error: str | None
+
+
+class JobDetail(JobSummary):
+    """Everything about one job."""
+
+    spec: dict[str, Any]
+    latest_metrics: MetricsPoint | None
+    evaluation: dict[str, Any] | None = Field(description="Summary of the final Monte-Carlo evaluation.")
+    error_detail: str | None = Field(description="Traceback of the last failed attempt.")
+    attempts: list[AttemptInfo]
+    links: dict[str, str]
+
+
+class JobList(BaseModel):
+    total: int = Field(description="Jobs matching the filter.")
+    limit: int
+    offset: int
+    next_offset: int | None = Field(description="Offset of the next page, null on the last one.")
+    items: list[JobSummary]
+
+
+class MetricsPage(BaseModel):
+    job_id: int
+    status: JobStatus
+    after: int
+    last_seq: int = Field(description="Pass this as `after` to get what comes next.")
+    more: bool = Field(description="True if the limit cut the page short.")
+    items: list[MetricsPoint]
+
+
+class ArtifactInfo(BaseModel):
+    name: str
+    kind: Literal["output", "checkpoint"]
+    size: int
+    sha256: str
+    content_type: str
+    attempt: int
+    created_at: datetime
+    url: str
+
+
+class CancelResult(BaseModel):
+    message: str
+    job: JobDetail
+
+
+class PresetInfo(BaseModel):
+    name: str
+    algorithm: str
+    grid_size: int
+    total_env_steps: int
+    url: str
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+    version: str
+    database: str
+    jobs: dict[str, int]
+    workers: list[dict[str, Any]]
+
+
+def progress_of(row: dict[str, Any]) -> Progress:
+    total = int(row["total_env_steps"] or 0)
+    steps = int(row["env_steps"] or 0)
+    return Progress(env_steps=steps, total_env_steps=total, fraction=min(1.0, steps / total) if total else 0.0,
+                    phase=row["phase"], checkpoint_env_steps=row["checkpoint_env_steps"],
+                    run_seconds=round(float(row["run_seconds"] or 0.0), 3))
+
+
+def job_summary(row: dict[str, Any]) -> JobSummary:
+    return JobSummary(
+        id=row["id"], name=row["name"], algorithm=row["algorithm"], status=row["status"],
+        created_at=_time(row["created_at"]), updated_at=_time(row["updated_at"]),
+        started_at=_time(row["started_at"]), finished_at=_time(row["finished_at"]), attempt=row["attempt"],
+        failures=row["failures"], max_attempts=row["max_attempts"], cancel_requested=bool(row["cancel_requested"]),
+        worker_id=row["worker_id"], lease_expires_at=_time(row["lease_expires_at"]), progress=progress_of(row),
+        last_eval=_json(row["last_eval"]), error=row["error"], url=f"/api/jobs/{row['id']}",
+    )
+
+
+def metrics_point(row: dict[str, Any]) -> MetricsPoint:
+    data = json.loads(row["data"])
+    data.pop("seq", None)
+    data.pop("attempt", None)
+    data.pop("time", None)
+    data["env_steps"] = row["env_steps"]
+    return MetricsPoint(seq=row["seq"], attempt=row["attempt"], time=_time(row["created_at"]), **data)
+
+
+def job_detail(row: dict[str, Any], latest: dict[str, Any] | None, attempts: list[dict[str, Any]]) -> JobDetail:
+    base = job_summary(row).model_dump()
+    jid = row["id"]
+    return JobDetail(
+        **base, spec=json.loads(row["spec"]), latest_metrics=metrics_point(latest) if latest else None,
+        evaluation=_json(row["summary"]), error_detail=row["error_detail"],
+        attempts=[AttemptInfo(**{**a, "started_at": _time(a["started_at"]), "ended_at": _time(a["ended_at"])})
+                  for a in attempts],
+        links={"self": f"/api/jobs/{jid}", "metrics": f"/api/jobs/{jid}/metrics",
+               "events": f"/api/jobs/{jid}/events", "artifacts": f"/api/jobs/{jid}/artifacts",
+               "cancel": f"/api/jobs/{jid}/cancel"},
+    )
+
+
+def artifact_info(job_id: int, row: dict[str, Any]) -> ArtifactInfo:
+    return ArtifactInfo(name=row["name"], kind=row["kind"], size=row["size"], sha256=row["sha256"],
+                        content_type=row["content_type"], attempt=row["attempt"], created_at=_time(row["created_at"]),
+                        url=f"/api/jobs/{job_id}/artifacts/{row['name']}")

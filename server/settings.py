@@ -1,0 +1,26 @@
+"""Settings of the API server (env prefix ``MODSAT_``); the queue settings come from
+:class:`worker.settings.WorkerSettings`. docs/service.md has the table."""
+
+from __future__ import annotations
+
+from pydantic import Field, SecretStr
+
+from worker.settings import WorkerSettings
+
+
+class ServerSettings(WorkerSettings):
+    """Everything ``modsat serve`` reads; workers ignore the API fields."""
+
+    api_token: SecretStr | None = Field(
+        None, description="If set, POST requests need `Authorization: Bearer <token>`. Reads stay open."
+    )
+    max_body_bytes: int = Field(
+        1_048_576, ge=1024, le=1 << 30, description="Largest request body accepted (413 above it)."
+    )
+    host: str = Field("127.0.0.1", description="Address `modsat serve` listens on.")
+    port: int = Field(8000, ge=0, le=65535, description="Port `modsat serve` listens on.")
+    sse_poll_s: float = Field(0.5, gt=0, le=60, description="How often an event stream looks for news.")
+    sse_keepalive_s: float = Field(15.0, gt=0, le=600, description="Comment line sent on a quiet event stream.")
+    sse_max_s: float = Field(
+        3600.0, gt=0, le=86_400, description="An event stream ends after this long (clients reconnect)."
+    )

@@ -1,0 +1,95 @@
+"""Turn a POST /api/jobs body into a :class:`JobSpec`, or into errors a person can act on.
+
+Two body forms (docs/service.md):
+
+* a whole JobSpec, e.g. ``{"algorithm": "td3-codesign", "training": {...}, ...}``;
+* a preset with overrides, e.g. ``{"preset": "quick", "overrides": {"seed": 3}}``. The
+  overrides are merged into the preset field by field (nested objects merge, anything
+  else replaces), and the result is validated like a whole spec.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from typing import Any
+
+from modsat_core.presets import PRESETS
+from modsat_core.spec import JobSpec, SpecError, parse_spec
+
+log = logging.getLogger("modsat.server")
+
+
+class BadRequest(Exception):
+    """The body cannot be read at all (400)."""
+
+
+class Invalid(Exception):
+    """The body was read but is not a valid submission (422). ``errors`` are FastAPI-style."""
+
+    def __init__(self, errors: list[dict[str, Any]]):
+        self.errors = errors
+        super().__init__("; ".join(e["msg"] for e in errors))
+
+
+def _error(loc: list[Any], msg: str, kind: str = "value_error") -> dict[str, Any]:
+    return {"loc": ["body", *loc], "msg": msg, "type": kind}
+
+
+def merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``overrides`` applied: nested dicts merge, other values replace."""
+    out = dict(base)
+    for k, v in overrides.items():
+        out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def decode_json(raw: bytes) -> Any:
+    if not raw.strip():
+        raise BadRequest("the request body is empty; send a JobSpec or {\"preset\": NAME} as JSON")
+    try:
+        return json.loads(raw)
+    except UnicodeDecodeError:
+        raise BadRequest("the request body is not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise BadRequest(f"the request body is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+                         ) from None
+    except (ValueError, RecursionError) as exc:  # e.g. an integer with too many digits, nesting too deep
+        raise BadRequest(f"the request body is not usable JSON: {type(exc).__name__}") from None
+
+
+def spec_from_body(body: Any) -> JobSpec:
+    """Validate a decoded body; raises :class:`Invalid` with one error per problem."""
+    if not isinstance(body, dict):
+        raise Invalid([_error(
+            [], 'body: expected a JSON object: a JobSpec, or {"preset": NAME, "overrides": {...}}', "dict_type")])
+    prefix: list[Any] = []
+    if "preset" in body:
+        extra = sorted(set(body) - {"preset", "overrides"})
+        if extra:
+            raise Invalid([_error([k], f"{k}: unknown field next to 'preset'; a preset submission has only "
+                                       f"'preset' and 'overrides' (put spec fields inside 'overrides')",
+                                  "extra_forbidden") for k in extra])
+        name, overrides = body["preset"], body.get("overrides", {})
+        if not isinstance(name, str) or name not in PRESETS:
+            raise Invalid([_error(["preset"], f"preset: unknown preset {name!r}; known: {', '.join(PRESETS)}",
+                                  "literal_error")])
+        if overrides is None:
+            overrides = {}
+        if not isinstance(overrides, dict):
+            raise Invalid([_error(["overrides"], "overrides: expected an object of spec fields, e.g. {\"seed\": 3}",
+                                  "dict_type")])
+        body = merge(PRESETS[name].model_dump(mode="json"), overrides)
+        prefix = ["overrides"]
+    try:
+        return parse_spec(body)
+    except SpecError as exc:
+        locs = [list(e.get("loc", ())) for e in exc.errors] or [[] for _ in exc.messages]
+        kinds = [str(e.get("type", "value_error")) for e in exc.errors] or ["value_error" for _ in exc.messages]
+        if len(locs) != len(exc.messages):
+            locs, kinds = [[] for _ in exc.messages], ["value_error" for _ in exc.messages]
+        errors = zip(locs, exc.messages, kinds, strict=True)
+        raise Invalid([_error(prefix + loc, msg, kind) for loc, msg, kind in errors]) from None
+    except (ValueError, TypeError, RecursionError) as exc:  # a validator bug must not become a 500
+        log.exception("spec validation raised unexpectedly")
+        raise Invalid([_error([], f"body: the spec could not be validated: {exc}")]) from None

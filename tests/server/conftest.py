@@ -1,0 +1,93 @@
+"""Fixtures for the API tests: a real uvicorn server in a subprocess, on a free port."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.worker.helpers import FAST_ENV, REPO, pg, spawn_worker, sqlite_url, wait_for  # noqa: F401
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_makereport(item, call):
+    rep = yield
+    setattr(item, f"rep_{rep.when}", rep)  # lets fixtures see whether the test failed
+    return rep
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ServerProc:
+    """``uvicorn server.app:create_app --factory`` with the given settings."""
+
+    def __init__(self, db_url: str, log_path: Path, env: dict[str, str] | None = None):
+        self.port = free_port()
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.log_path = log_path
+        self._log = open(log_path, "wb")  # noqa: SIM115 - closed in stop()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", "server.app:create_app", "--factory", "--host", "127.0.0.1",
+             "--port", str(self.port), "--timeout-graceful-shutdown", "2"],
+            cwd=REPO, env={**os.environ, **FAST_ENV, "MODSAT_DB_URL": db_url, **(env or {})},
+            stdout=self._log, stderr=subprocess.STDOUT,
+        )
+        wait_for(self._up, 30, f"the API server on port {self.port}")
+        self.client = httpx.Client(base_url=self.base, timeout=30)
+
+    def _up(self) -> bool:
+        if self.proc.poll() is not None:
+            raise AssertionError(f"the server exited:\n{self.log_path.read_text()}")
+        try:
+            return httpx.get(f"{self.base}/api/health", timeout=2).status_code == 200
+        except httpx.HTTPError:
+            return False
+
+    def stop(self) -> None:
+        self.client.close()
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+
+
+@pytest.fixture
+def start_server(tmp_path, request):
+    """Factory: start API servers; all are stopped (and their logs shown on failure) at teardown."""
+    servers: list[ServerProc] = []
+
+    def start(db_url: str, env: dict[str, str] | None = None) -> ServerProc:
+        s = ServerProc(db_url, tmp_path / f"server{len(servers)}.log", env)
+        servers.append(s)
+        return s
+
+    yield start
+    for s in servers:
+        s.stop()
+    failed = getattr(request.node, "rep_call", None)
+    if failed is not None and failed.failed:
+        for s in servers:
+            print(f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}")
+
+
+@pytest.fixture(scope="module")
+def api(tmp_path_factory):
+    """One server without workers and without a token, shared by a module's read/validation tests."""
+    d = tmp_path_factory.mktemp("api")
+    s = ServerProc(f"sqlite:///{d / 'jobs.db'}", d / "server.log")
+    yield s
+    s.stop()

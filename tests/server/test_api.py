@@ -1,0 +1,180 @@
+"""The REST API over real HTTP (uvicorn subprocess, SQLite): submission forms, validation
+messages, 400/401/404/409/413/422, listing, presets, schema, health, the page."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import pytest
+
+from modsat_core.presets import PRESETS, get_preset
+
+TINY = {"preset": "quick", "overrides": {"training": {"total_env_steps": 400}}}
+
+
+def test_submit_preset_returns_201_with_location(api):
+    r = api.client.post("/api/jobs", json=TINY)
+    assert r.status_code == 201, r.text
+    job = r.json()
+    assert r.headers["location"] == f"/api/jobs/{job['id']}"
+    assert job["status"] == "queued" and job["name"] == "quick"
+    assert job["spec"]["training"]["total_env_steps"] == 400
+    assert job["spec"]["training"]["hidden_sizes"] == [64, 64], "the rest comes from the preset"
+    assert job["progress"] == {"env_steps": 0, "total_env_steps": 400, "fraction": 0.0, "phase": None,
+                               "checkpoint_env_steps": None, "run_seconds": 0.0}
+    again = api.client.get(r.headers["location"]).json()
+    assert again["id"] == job["id"] and again["spec"] == job["spec"]
+
+
+def test_submit_whole_spec(api):
+    spec = get_preset("quick").model_dump(mode="json")
+    spec["name"] = "my run"
+    spec["seed"] = 42
+    r = api.client.post("/api/jobs", json=spec)
+    assert r.status_code == 201, r.text
+    assert r.json()["spec"]["seed"] == 42 and r.json()["name"] == "my run"
+
+
+@pytest.mark.parametrize("body, field, words", [
+    ({"training": {"total_env_steps": 0}}, "training.total_env_steps", ">= 1"),
+    ({"design": {"grid_size": 11}}, "design.grid_size", "<= 10"),
+    ({"algorithm": "ppo"}, "algorithm", "td3-codesign"),
+    ({"trainig": {}}, "trainig", "unknown field"),
+    ({"preset": "quick", "overrides": {"mission": {"slew_max_deg": 200}}}, "mission.slew_max_deg", "<= 180"),
+    ({"preset": "nope"}, "preset", "known: "),
+    ({"preset": "quick", "overrides": [1]}, "overrides", "expected an object"),
+    ({"preset": "quick", "seed": 3}, "seed", "inside 'overrides'"),
+    ([1, 2], "body", "expected a JSON object"),
+])
+def test_invalid_spec_is_422_naming_the_field(api, body, field, words):
+    r = api.client.post("/api/jobs", json=body)
+    assert r.status_code == 422, r.text
+    messages = r.json()["messages"]
+    assert any(m.startswith(field) or field in m for m in messages), messages
+    assert any(words in m for m in messages), messages
+    assert all(e["loc"][0] == "body" for e in r.json()["detail"])
+
+
+@pytest.mark.parametrize("raw", [b"{", b"", b"\xff\xfe\x00", b"[" * 100_000 + b"]" * 100_000, b"1" * 5000])
+def test_unreadable_body_is_400(api, raw):
+    r = api.client.post("/api/jobs", content=raw, headers={"content-type": "application/json"})
+    assert r.status_code == 400, r.text
+    assert r.json()["detail"]
+
+
+def test_oversized_body_is_413_declared_and_chunked(api):
+    big = json.dumps({"name": "x" * 2_000_000}).encode()
+    r = api.client.post("/api/jobs", content=big, headers={"content-type": "application/json"})
+    assert r.status_code == 413 and "larger than" in r.json()["detail"]
+
+    def chunks():  # no Content-Length: Transfer-Encoding chunked
+        for _ in range(40):
+            yield b" " * 65536
+
+    r = api.client.post("/api/jobs", content=chunks(), headers={"content-type": "application/json"})
+    assert r.status_code == 413
+
+
+def test_unknown_job_is_404_everywhere(api):
+    for path in ("/api/jobs/999999", "/api/jobs/999999/metrics", "/api/jobs/999999/events",
+                 "/api/jobs/999999/artifacts", "/api/jobs/999999/artifacts/policy.pt",
+                 "/api/jobs/0", "/api/jobs/-3", f"/api/jobs/{2**80}"):
+        r = api.client.get(path)
+        assert r.status_code == 404, (path, r.text)
+        assert "no job" in r.json()["detail"]
+    assert api.client.post("/api/jobs/999999/cancel").status_code == 404
+    assert api.client.get("/api/jobs/abc").status_code == 422
+
+
+def test_artifact_names_outside_the_stored_set_are_404(api):
+    job_id = api.client.post("/api/jobs", json=TINY).json()["id"]
+    assert api.client.get(f"/api/jobs/{job_id}/artifacts").json() == []
+    for name in ("..%2Fx", "..%2F..%2Fetc%2Fpasswd", "policy.pt", "%2e%2e", "%2e%2e%2f%2e%2e%2fmodsat.db", "modsat.db"):
+        r = api.client.get(f"/api/jobs/{job_id}/artifacts/{name}")
+        assert r.status_code == 404, (name, r.status_code)
+    # An un-encoded ../ is normalised by the client (and would be by any browser).
+    raw = httpx.get(f"{api.base}/api/jobs/{job_id}/artifacts/../x")
+    assert raw.status_code == 404
+
+
+def test_list_filter_and_pagination(api):
+    ids = [api.client.post("/api/jobs", json=TINY).json()["id"] for _ in range(5)]
+    api.client.post(f"/api/jobs/{ids[0]}/cancel")
+    page = api.client.get("/api/jobs", params={"limit": 2}).json()
+    assert page["limit"] == 2 and page["offset"] == 0 and len(page["items"]) == 2
+    assert page["items"][0]["id"] == ids[-1], "newest first"
+    assert page["next_offset"] == 2 and page["total"] >= 5
+    everything, offset = [], 0
+    while offset is not None:
+        p = api.client.get("/api/jobs", params={"limit": 3, "offset": offset}).json()
+        everything += [j["id"] for j in p["items"]]
+        offset = p["next_offset"]
+    assert len(everything) == page["total"] == len(set(everything))
+    cancelled = api.client.get("/api/jobs", params={"status": "cancelled"}).json()
+    assert ids[0] in [j["id"] for j in cancelled["items"]]
+    assert all(j["status"] == "cancelled" for j in cancelled["items"])
+    both = api.client.get("/api/jobs", params=[("status", "cancelled"), ("status", "queued")]).json()
+    assert both["total"] == page["total"]
+    r = api.client.get("/api/jobs", params={"status": "done", "limit": 0})
+    assert r.status_code == 422
+    assert any(m.startswith("query.status") for m in r.json()["messages"])
+    assert any(m.startswith("query.limit") for m in r.json()["messages"])
+
+
+def test_cancel_queued_job(api):
+    job_id = api.client.post("/api/jobs", json=TINY).json()["id"]
+    r = api.client.post(f"/api/jobs/{job_id}/cancel")
+    assert r.status_code == 200
+    assert r.json()["job"]["status"] == "cancelled" and "now cancelled" in r.json()["message"]
+    again = api.client.post(f"/api/jobs/{job_id}/cancel")
+    assert again.status_code == 200 and "already cancelled" in again.json()["message"]
+    assert api.client.get(f"/api/jobs/{job_id}").json()["status"] == "cancelled"
+
+
+def test_metrics_and_events_of_a_job_without_progress(api):
+    job_id = api.client.post("/api/jobs", json=TINY).json()["id"]
+    m = api.client.get(f"/api/jobs/{job_id}/metrics", params={"after": 0}).json()
+    assert m == {"job_id": job_id, "status": "queued", "after": 0, "last_seq": 0, "more": False, "items": []}
+    api.client.post(f"/api/jobs/{job_id}/cancel")
+    with api.client.stream("GET", f"/api/jobs/{job_id}/events") as r:
+        assert r.headers["content-type"].startswith("text/event-stream")
+        text = r.read().decode()
+    assert "event: status" in text and text.rstrip().endswith('"last_seq": 0}')
+    assert "event: end" in text and '"status": "cancelled"' in text
+
+
+def test_presets_schema_health_and_page(api):
+    presets = api.client.get("/api/presets").json()
+    assert [p["name"] for p in presets] == list(PRESETS)
+    quick = api.client.get("/api/presets/quick").json()
+    assert quick == get_preset("quick").model_dump(mode="json")
+    r = api.client.get("/api/presets/nope")
+    assert r.status_code == 404 and "quick" in r.json()["detail"]
+    schema = api.client.get("/api/schema").json()
+    assert "training" in schema["properties"] and "$defs" in schema
+    health = api.client.get("/api/health").json()
+    assert health["status"] == "ok" and health["database"] == "sqlite"
+    assert sum(health["jobs"].values()) >= 1
+    openapi = api.client.get("/api/openapi.json").json()
+    assert "JobSpec" in openapi["components"]["schemas"]
+    page = api.client.get("/")
+    assert page.status_code == 200 and "/api/jobs" in page.text
+
+
+def test_writes_need_the_bearer_token_when_set(start_server, sqlite_url):
+    s = start_server(sqlite_url, env={"MODSAT_API_TOKEN": "s3cret"})
+    r = s.client.post("/api/jobs", json=TINY)
+    assert r.status_code == 401 and r.headers["www-authenticate"] == "Bearer"
+    assert "Authorization: Bearer" in r.json()["detail"]
+    r = s.client.post("/api/jobs", json=TINY, headers={"Authorization": "Bearer wrong"})
+    assert r.status_code == 401
+    r = s.client.post("/api/jobs", json={"bad": 1}, headers={"Authorization": "Basic s3cret"})
+    assert r.status_code == 401, "the token is checked before the body"
+    ok = s.client.post("/api/jobs", json=TINY, headers={"Authorization": "Bearer s3cret"})
+    assert ok.status_code == 201
+    job_id = ok.json()["id"]
+    assert s.client.post(f"/api/jobs/{job_id}/cancel").status_code == 401
+    assert s.client.post(f"/api/jobs/{job_id}/cancel", headers={"Authorization": "Bearer s3cret"}).status_code == 200
+    assert s.client.get(f"/api/jobs/{job_id}").status_code == 200, "reads stay open"
+    assert s.client.get("/api/jobs").status_code == 200

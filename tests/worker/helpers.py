@@ -1,0 +1,212 @@
+"""Shared test helpers for the service: databases, worker processes, waiting.
+
+The PostgreSQL tests use a database created for this test session on the local server
+(``MODSAT_TEST_PG_URL``, default ``postgresql://postgres@127.0.0.1:5432/postgres`` as the
+admin connection) and skip with the reason when none is reachable.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+PG_ADMIN_URL = os.environ.get("MODSAT_TEST_PG_URL", "postgresql://postgres@127.0.0.1:5432/postgres")
+
+#: Fast leases so that crash tests take seconds.
+FAST_ENV = {
+    "MODSAT_LEASE_S": "2.5",
+    "MODSAT_HEARTBEAT_S": "0.4",
+    "MODSAT_POLL_S": "0.2",
+    "MODSAT_RETRY_DELAY_S": "0",
+    "MODSAT_CANCEL_GRACE_S": "5",
+    "MODSAT_SIM_STEPS_PER_S": "1000",
+}
+
+
+def wait_for(pred: Callable[[], Any], timeout: float, what: str, interval: float = 0.1) -> Any:
+    """Poll ``pred`` until it returns something truthy; fail with ``what`` after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = pred()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(interval)
+
+
+def spec_json(total_env_steps: int = 400, *, checkpoint_every: int = 100, num_envs: int = 16, seed: int = 0,
+              name: str | None = None) -> str:
+    """A tiny valid JobSpec (the quick preset with a small budget)."""
+    from modsat_core.presets import get_preset
+    from modsat_core.spec import parse_spec
+
+    d = get_preset("quick").model_dump(mode="json")
+    d["seed"] = seed
+    d["name"] = name or "test"
+    d["training"].update(total_env_steps=total_env_steps, checkpoint_every_steps=checkpoint_every,
+                         eval_every_steps=max(1, total_env_steps // 2), num_envs=num_envs)
+    return parse_spec(d).model_dump_json()
+
+
+def submit(store, total_env_steps: int = 400, *, max_attempts: int = 3, **kw) -> int:
+    text = spec_json(total_env_steps, **kw)
+    return store.submit(text, name="test", algorithm="td3-codesign", total_env_steps=total_env_steps,
+                        max_attempts=max_attempts)
+
+
+class WorkerProc:
+    """A real ``python -m worker`` process with its own session (so we can signal it alone)."""
+
+    def __init__(self, db_url: str, runner: str, log_path: Path, env: dict[str, str] | None = None):
+        self.log_path = log_path
+        self._log = open(log_path, "wb")  # noqa: SIM115 - closed in stop()
+        full_env = {**os.environ, **FAST_ENV, **(env or {})}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "worker", "--db", db_url, "--runner", runner],
+            cwd=REPO, env=full_env, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True,
+        )
+        self.pid = self.proc.pid
+
+    def children(self) -> list[int]:
+        """Pids of this worker's child processes (the training), from /proc."""
+        out = []
+        for task in Path(f"/proc/{self.pid}/task").glob("*"):
+            try:
+                out += [int(x) for x in (task / "children").read_text().split()]
+            except OSError:
+                pass
+        return out
+
+    def signal(self, sig: int) -> None:
+        if self.proc.poll() is None:
+            os.kill(self.pid, sig)
+
+    def stop(self, timeout: float = 15.0) -> int | None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie is dead for our purposes
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+class PgServer:
+    """Creates one throw-away database per test session on the local PostgreSQL server."""
+
+    def __init__(self, admin_url: str = PG_ADMIN_URL):
+        self.admin_url = admin_url
+        self.reason: str | None = None
+        self.url: str | None = None
+        self.dbname = f"modsat_test_{os.getpid()}_{uuid.uuid4().hex[:6]}"
+
+    def _admin(self):
+        import psycopg
+
+        return psycopg.connect(self.admin_url.replace("postgresql+psycopg", "postgresql"), autocommit=True,
+                               connect_timeout=3)
+
+    def start(self) -> None:
+        try:
+            with self._admin() as conn:
+                conn.execute(f'CREATE DATABASE "{self.dbname}"')
+        except Exception as exc:  # noqa: BLE001 - any failure means: no PostgreSQL here
+            self.reason = f"PostgreSQL not reachable at {self.admin_url} (set MODSAT_TEST_PG_URL): {exc}"
+            return
+        base = self.admin_url.rsplit("/", 1)[0]
+        self.url = f"{base}/{self.dbname}"
+
+    def stop(self) -> None:
+        if self.url is None:
+            return
+        try:
+            with self._admin() as conn:
+                conn.execute(f'DROP DATABASE IF EXISTS "{self.dbname}" WITH (FORCE)')
+        except Exception:  # noqa: BLE001 - best effort
+            pass
+
+
+def fresh_db_url(kind: str, tmp_path: Path, pg: PgServer) -> str:
+    """An empty job store of ``kind`` (sqlite | postgresql) with the tables created."""
+    from worker.store import JobStore
+
+    if kind == "sqlite":
+        url = f"sqlite:///{tmp_path / 'jobs.db'}"
+    else:
+        if pg.url is None:
+            pytest.skip(pg.reason or "PostgreSQL not available")
+        url = pg.url
+    store = JobStore(url)
+    store.drop_schema()
+    store.create_schema()
+    store.dispose()
+    return url
+
+
+# ----------------------------------------------------------------------------- fixtures
+# Imported by tests/worker/conftest.py and tests/server/conftest.py.
+
+
+@pytest.fixture(scope="session")
+def pg():
+    server = PgServer()
+    server.start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request, tmp_path, pg) -> str:
+    """An empty job store, once on SQLite and once on PostgreSQL."""
+    return fresh_db_url(request.param, tmp_path, pg)
+
+
+@pytest.fixture
+def sqlite_url(tmp_path) -> str:
+    return f"sqlite:///{tmp_path / 'jobs.db'}"
+
+
+@pytest.fixture
+def spawn_worker(tmp_path, request):
+    """Start real worker processes; all are stopped (and their logs shown on failure) at teardown."""
+    procs: list[WorkerProc] = []
+
+    def spawn(db_url: str, runner: str = "simulated", env: dict[str, str] | None = None) -> WorkerProc:
+        w = WorkerProc(db_url, runner, tmp_path / f"worker{len(procs)}.log", env)
+        procs.append(w)
+        return w
+
+    yield spawn
+    for w in procs:
+        w.stop()
+    failed = getattr(request.node, "rep_call", None)
+    if failed is not None and failed.failed:
+        for w in procs:
+            print(f"----- log of worker {w.pid}\n{w.log()}")

@@ -1,0 +1,192 @@
+"""The job store's schema and engine: one SQLAlchemy 2 schema for SQLite and PostgreSQL.
+
+Only the URL differs between the two. Two dialect details are handled here, once:
+
+* ``db_now()`` is the database's clock in epoch seconds. Leases are compared with it, so
+  workers on several machines never compare their own clocks with each other.
+* SQLite: WAL, a busy timeout, and ``BEGIN IMMEDIATE`` for write transactions (a
+  transaction that reads first and then writes could otherwise fail with ``SQLITE_BUSY``
+  instead of waiting). Read transactions use a plain ``BEGIN`` so readers never wait.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sqlalchemy import (
+    BigInteger,
+    Boolean,
+    Column,
+    Double,
+    Engine,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Table,
+    Text,
+    create_engine,
+    event,
+)
+from sqlalchemy.engine import make_url
+from sqlalchemy.ext.compiler import compiles
+from sqlalchemy.sql.functions import FunctionElement
+
+metadata = MetaData()
+
+#: Job ids are BIGINT on PostgreSQL; SQLite needs INTEGER for its rowid auto-increment.
+_Id = BigInteger().with_variant(Integer(), "sqlite")
+
+JOB_STATUSES = ("queued", "running", "succeeded", "failed", "cancelled")
+TERMINAL_STATUSES = ("succeeded", "failed", "cancelled")
+
+jobs = Table(
+    "modsat_jobs",
+    metadata,
+    Column("id", _Id, primary_key=True, autoincrement=True),
+    Column("name", String(200)),
+    Column("algorithm", String(32), nullable=False),
+    Column("spec", Text, nullable=False),  # JobSpec JSON
+    Column("status", String(16), nullable=False, default="queued"),
+    Column("created_at", Double, nullable=False),  # epoch seconds, database clock
+    Column("updated_at", Double, nullable=False),
+    Column("started_at", Double),  # first claim
+    Column("finished_at", Double),
+    # Claim and lease. `attempt` is the fencing token: +1 at every claim.
+    Column("attempt", Integer, nullable=False, default=0),
+    Column("failures", Integer, nullable=False, default=0),
+    Column("max_attempts", Integer, nullable=False),
+    Column("run_after", Double),  # retry back-off: not claimable before this
+    Column("worker_id", String(200)),
+    Column("lease_expires_at", Double),
+    Column("heartbeat_at", Double),
+    Column("cancel_requested", Boolean, nullable=False, default=False),
+    # Progress, as last published by the lease holder.
+    Column("last_seq", Integer, nullable=False, default=0),
+    Column("env_steps", BigInteger, nullable=False, default=0),
+    Column("total_env_steps", BigInteger, nullable=False),
+    Column("phase", String(32)),
+    Column("last_eval", Text),  # JSON of the latest learning-curve point
+    Column("checkpoint_env_steps", BigInteger),
+    Column("run_seconds", Double, nullable=False, default=0.0),  # wall time of finished attempts
+    # Outcome.
+    Column("summary", Text),  # JSON evaluation summary of a succeeded run
+    Column("error", Text),
+    Column("error_detail", Text),  # traceback of the last failed attempt
+)
+Index("ix_modsat_jobs_claim", jobs.c.status, jobs.c.id)
+
+attempts = Table(
+    "modsat_attempts",
+    metadata,
+    Column("job_id", _Id, ForeignKey("modsat_jobs.id", ondelete="CASCADE"), primary_key=True),
+    Column("attempt", Integer, primary_key=True),
+    Column("worker_id", String(200), nullable=False),
+    Column("started_at", Double, nullable=False),
+    Column("ended_at", Double),
+    # running | succeeded | failed | crashed | lease-expired | cancelled | released
+    Column("outcome", String(16), nullable=False),
+    Column("resumed_from_env_steps", BigInteger),
+    Column("error", Text),
+)
+
+metrics = Table(
+    "modsat_metrics",
+    metadata,
+    Column("job_id", _Id, ForeignKey("modsat_jobs.id", ondelete="CASCADE"), primary_key=True),
+    Column("seq", Integer, primary_key=True),  # per job, 1, 2, 3, ... (jobs.last_seq)
+    Column("attempt", Integer, nullable=False),
+    Column("created_at", Double, nullable=False),
+    Column("env_steps", BigInteger, nullable=False),
+    Column("data", Text, nullable=False),  # JSON of the progress dict (+ elapsed_s)
+)
+
+artifacts = Table(
+    "modsat_artifacts",
+    metadata,
+    Column("job_id", _Id, ForeignKey("modsat_jobs.id", ondelete="CASCADE"), primary_key=True),
+    Column("name", String(200), primary_key=True),
+    Column("kind", String(16), nullable=False),  # output | checkpoint
+    Column("attempt", Integer, nullable=False),
+    Column("size", BigInteger, nullable=False),
+    Column("sha256", String(64), nullable=False),
+    Column("content_type", String(100), nullable=False),
+    Column("created_at", Double, nullable=False),
+    Column("data", LargeBinary, nullable=False),
+)
+
+workers = Table(
+    "modsat_workers",
+    metadata,
+    Column("id", String(200), primary_key=True),
+    Column("hostname", String(200), nullable=False),
+    Column("pid", Integer, nullable=False),
+    Column("runner", String(200), nullable=False),
+    Column("started_at", Double, nullable=False),
+    Column("last_seen", Double, nullable=False),
+    Column("expires_at", Double, nullable=False),  # counted as alive until then
+    Column("job_id", _Id),
+    Column("stopped_at", Double),
+)
+
+
+class db_now(FunctionElement):
+    """The database server's clock, epoch seconds (float)."""
+
+    type = Double()
+    inherit_cache = True
+
+
+@compiles(db_now, "sqlite")
+def _db_now_sqlite(element, compiler, **kw):  # noqa: ARG001
+    return "((julianday('now') - 2440587.5) * 86400.0)"
+
+
+@compiles(db_now, "postgresql")
+def _db_now_postgresql(element, compiler, **kw):  # noqa: ARG001
+    return "CAST(EXTRACT(EPOCH FROM clock_timestamp()) AS DOUBLE PRECISION)"
+
+
+def normalize_url(url: str) -> str:
+    """``postgresql://`` means psycopg 3 here (SQLAlchemy's default driver would be psycopg2)."""
+    u = make_url(url)
+    if u.drivername in ("postgresql", "postgres"):
+        u = u.set(drivername="postgresql+psycopg")
+    return u.render_as_string(hide_password=False)
+
+
+def make_engine(url: str, *, busy_timeout_s: float = 30.0) -> Engine:
+    """An engine for ``url`` (SQLite file or PostgreSQL), configured for the job store."""
+    url = normalize_url(url)
+    u = make_url(url)
+    if u.get_backend_name() == "sqlite":
+        if u.database and u.database != ":memory:":
+            Path(u.database).parent.mkdir(parents=True, exist_ok=True)
+        engine = create_engine(
+            url, pool_size=16, max_overflow=32, connect_args={"timeout": busy_timeout_s, "check_same_thread": False}
+        )
+        _configure_sqlite(engine, busy_timeout_s)
+        return engine
+    if u.get_backend_name() == "postgresql":
+        return create_engine(url, pool_size=10, max_overflow=20, pool_pre_ping=True)
+    raise ValueError(f"unsupported database URL {u.render_as_string()!r}: use sqlite:///PATH or postgresql://...")
+
+
+def _configure_sqlite(engine: Engine, busy_timeout_s: float) -> None:
+    @event.listens_for(engine, "connect")
+    def _on_connect(dbapi_conn, _record) -> None:
+        # We emit BEGIN ourselves (below); pysqlite's own transaction handling is off.
+        dbapi_conn.isolation_level = None
+        cur = dbapi_conn.cursor()
+        cur.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
+        cur.execute("PRAGMA journal_mode = WAL")
+        cur.execute("PRAGMA synchronous = NORMAL")  # durable in WAL mode up to the last checkpoint
+        cur.execute("PRAGMA foreign_keys = ON")
+        cur.close()
+
+    @event.listens_for(engine, "begin")
+    def _on_begin(conn) -> None:
+        immediate = conn.get_execution_options().get("modsat_write", False)
+        conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")

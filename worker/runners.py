@@ -1,0 +1,118 @@
+"""What a job runs. The default is ``modsat_core.train.train``; the others are real runners
+that follow the same contract (docs/train-interface.md) for tests and benchmarks of the
+queue, without the cost of training:
+
+* ``noop``: returns at once with one small artefact.
+* ``simulated``: counts environment steps at ``MODSAT_SIM_STEPS_PER_S`` (default 2000) in
+  ticks of ``training.num_envs`` steps, reports progress and learning-curve points, writes
+  checkpoints every ``training.checkpoint_every_steps`` and resumes from them, honours
+  ``should_stop``. Its artefact ``run.json`` records where it resumed from.
+* ``raise``: raises ``RuntimeError`` (the message names the job's seed).
+
+A runner is named by the ``runner`` setting: one of the names above, ``train``, or
+``package.module:function``. A runner module may define ``checkpoint_to_bytes`` and
+``checkpoint_from_bytes``; otherwise checkpoints are pickled.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import pickle
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+RUNNERS = {
+    "train": "modsat_core.train:train",
+    "noop": "worker.runners:noop",
+    "simulated": "worker.runners:simulated",
+    "raise": "worker.runners:raising",
+}
+
+
+@dataclass
+class Runner:
+    """A training function and the (de)serialisers of its checkpoints."""
+
+    train: Callable[..., Any]
+    checkpoint_to_bytes: Callable[[dict], bytes]
+    checkpoint_from_bytes: Callable[[bytes], dict]
+
+
+def runner_path(name: str) -> str:
+    path = RUNNERS.get(name, name)
+    if ":" not in path:
+        raise ValueError(f"unknown runner {name!r}: use one of {', '.join(RUNNERS)} or 'package.module:function'")
+    return path
+
+
+def load_runner(name: str) -> Runner:
+    module_name, func_name = runner_path(name).split(":", 1)
+    module = importlib.import_module(module_name)
+    return Runner(
+        train=getattr(module, func_name),
+        checkpoint_to_bytes=getattr(module, "checkpoint_to_bytes", pickle.dumps),
+        checkpoint_from_bytes=getattr(module, "checkpoint_from_bytes", pickle.loads),
+    )
+
+
+@dataclass
+class SimpleResult:
+    """A :class:`RunResult` look-alike for the test runners."""
+
+    stopped: bool
+    env_steps: int
+    files: dict[str, bytes] = field(default_factory=dict)
+    summary: dict | None = None
+
+    def artifacts(self) -> dict[str, bytes]:
+        return dict(self.files)
+
+
+def checkpoint_to_bytes(ckpt: dict) -> bytes:
+    return json.dumps(ckpt).encode()
+
+
+def checkpoint_from_bytes(data: bytes) -> dict:
+    return json.loads(data)
+
+
+def noop(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:  # noqa: ARG001
+    total = spec.training.total_env_steps
+    on_progress({"env_steps": total, "total_env_steps": total, "updates": 0, "phase": "training", "eval": None})
+    return SimpleResult(False, total, {"result.json": b'{"runner": "noop"}'}, {"runner": "noop"})
+
+
+def raising(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:  # noqa: ARG001
+    raise RuntimeError(f"simulated training failure (runner 'raise', seed {spec.seed})")
+
+
+def simulated(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:
+    t = spec.training
+    rate = float(os.environ.get("MODSAT_SIM_STEPS_PER_S", "2000"))
+    tick = max(1, t.num_envs)
+    env_steps = int(checkpoint["env_steps"]) if checkpoint else 0
+    resumed_from = env_steps if checkpoint else None
+    next_ckpt = (env_steps // t.checkpoint_every_steps + 1) * t.checkpoint_every_steps
+    next_eval = (env_steps // t.eval_every_steps + 1) * t.eval_every_steps
+    while env_steps < t.total_env_steps:
+        if should_stop():
+            on_checkpoint({"env_steps": env_steps, "resumed_from": resumed_from})
+            return SimpleResult(True, env_steps)
+        time.sleep(tick / rate)
+        env_steps = min(t.total_env_steps, env_steps + tick)
+        point = None
+        if env_steps >= next_eval or env_steps >= t.total_env_steps:
+            point = {"env_steps": env_steps, "mean_return": env_steps / t.total_env_steps, "success_rate": 0.0}
+            next_eval = (env_steps // t.eval_every_steps + 1) * t.eval_every_steps
+        on_progress({"env_steps": env_steps, "total_env_steps": t.total_env_steps, "updates": env_steps // 2,
+                     "phase": "training", "eval": point})
+        if env_steps >= next_ckpt and env_steps < t.total_env_steps:
+            on_checkpoint({"env_steps": env_steps, "resumed_from": resumed_from})
+            next_ckpt = (env_steps // t.checkpoint_every_steps + 1) * t.checkpoint_every_steps
+    run = {"runner": "simulated", "env_steps": env_steps, "resumed_from": resumed_from, "pid": os.getpid()}
+    return SimpleResult(False, env_steps, {"run.json": json.dumps(run).encode()}, {"runner": "simulated",
+                                                                                   "resumed_from": resumed_from})

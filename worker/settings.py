@@ -1,0 +1,66 @@
+"""Settings of the job service, read from ``MODSAT_*`` environment variables.
+
+:class:`WorkerSettings` is what a worker needs; the API server's settings
+(``server.settings.ServerSettings``) extend it. Every field is documented in
+docs/service.md (the table there is this file, in words).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+DEFAULT_DATA_DIR = Path("modsat-data")
+DB_FILE_NAME = "modsat.db"
+
+
+def default_db_url(data_dir: Path) -> str:
+    """The SQLite file of a one-machine deployment: ``<data_dir>/modsat.db``."""
+    return f"sqlite:///{(Path(data_dir) / DB_FILE_NAME).resolve()}"
+
+
+class WorkerSettings(BaseSettings):
+    """Queue and worker settings (env prefix ``MODSAT_``)."""
+
+    model_config = SettingsConfigDict(env_prefix="MODSAT_", extra="ignore")
+
+    data_dir: Path = Field(DEFAULT_DATA_DIR, description="Where the default SQLite database lives.")
+    db_url: str | None = Field(
+        None,
+        description="SQLAlchemy URL of the job store. Unset: SQLite file `<data_dir>/modsat.db`. "
+        "`postgresql://user@host/db` uses psycopg 3.",
+    )
+    sqlite_busy_timeout_s: float = Field(30.0, gt=0, le=3600, description="How long SQLite waits for a lock.")
+    lease_s: float = Field(30.0, gt=0.2, le=86_400, description="A claim is held this long without a heartbeat.")
+    heartbeat_s: float | None = Field(
+        None, gt=0, le=3600, description="Heartbeat period; unset = lease_s / 4."
+    )
+    max_attempts: int = Field(
+        3, ge=1, le=100, description="Failed attempts (error, crash, lost lease) before a job is `failed`."
+    )
+    retry_delay_s: float = Field(
+        5.0, ge=0, le=86_400, description="A failed attempt is retried no sooner than this (doubling each time)."
+    )
+    poll_s: float = Field(1.0, gt=0, le=60, description="How often an idle worker looks for work.")
+    cancel_grace_s: float = Field(
+        20.0, ge=0, le=3600, description="Time a training gets to stop after a cancel or shutdown, then it is killed."
+    )
+    runner: str = Field(
+        "train",
+        description="What a job runs: `train` (modsat_core.train.train), or `noop` / `simulated` / `raise` "
+        "(test and benchmark runners in worker.runners), or `package.module:function`.",
+    )
+
+    @model_validator(mode="after")
+    def _resolve(self) -> WorkerSettings:
+        if self.heartbeat_s is None:
+            self.heartbeat_s = self.lease_s / 4
+        if self.heartbeat_s >= self.lease_s:
+            raise ValueError(f"heartbeat_s ({self.heartbeat_s}) must be shorter than lease_s ({self.lease_s})")
+        return self
+
+    @property
+    def resolved_db_url(self) -> str:
+        return self.db_url or default_db_url(self.data_dir)
