@@ -149,7 +149,9 @@ class Health(BaseModel):
 def progress_of(row: dict[str, Any]) -> Progress:
     total = int(row["total_env_steps"] or 0)
     steps = int(row["env_steps"] or 0)
-    return Progress(env_steps=steps, total_env_steps=total, fraction=min(1.0, steps / total) if total else 0.0,
+    # A finished run may stop up to num_envs - 1 steps short of its budget (whole batches).
+    fraction = 1.0 if row.get("status") == "succeeded" else (min(1.0, steps / total) if total else 0.0)
+    return Progress(env_steps=steps, total_env_steps=total, fraction=fraction,
                     phase=row["phase"], checkpoint_env_steps=row["checkpoint_env_steps"],
                     run_seconds=round(float(row["run_seconds"] or 0.0), 3))
 
