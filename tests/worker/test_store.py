@@ -13,13 +13,6 @@ from worker.store import CHECKPOINT_NAME, JobStore
 from .helpers import submit
 
 
-@pytest.fixture
-def store(db_url):
-    s = JobStore(db_url)
-    yield s
-    s.dispose()
-
-
 def test_concurrent_claims_take_each_job_exactly_once(store, db_url):
     ids = {submit(store) for _ in range(30)}
     claimed: list[tuple[str, int]] = []

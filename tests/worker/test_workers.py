@@ -20,13 +20,6 @@ from worker.store import JobStore
 from .helpers import pid_alive, submit, wait_for
 
 
-@pytest.fixture
-def store(db_url):
-    s = JobStore(db_url)
-    yield s
-    s.dispose()
-
-
 def _status(store, job_id):
     return store.get_job(job_id)["status"]
 
