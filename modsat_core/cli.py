@@ -150,13 +150,17 @@ def _cmd_train(args: argparse.Namespace) -> int:
         print(f"stopped at {result.env_steps:,} env steps; continue with: modsat train ... --out {out} --resume",
               file=sys.stderr)
         return 130
-    for name, data in result.artifacts().items():
+    from modsat_viewer.recording import add_recording  # the 3D replay, evaluation.viser (docs/viewer.md)
+
+    files = result.artifacts()
+    add_recording(files)
+    for name, data in files.items():
         with open(os.path.join(out, name), "wb") as fh:
             fh.write(data)
     if os.path.exists(ckpt_path):
         os.remove(ckpt_path)
     _print_evaluation(result.summary, sys.stdout)
-    print(f"outputs in {out}/: {', '.join(sorted(result.artifacts()))}")
+    print(f"outputs in {out}/: {', '.join(sorted(files))}")
     return 0
 
 

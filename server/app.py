@@ -1,6 +1,7 @@
 """The FastAPI application: ``create_app()`` (uvicorn: ``server.app:create_app --factory``).
 
-Everything lives under ``/api``; ``/`` is a small page that lists jobs through the API.
+Everything lives under ``/api``; ``/`` is the web UI (web/, static files), ``/viser-client/``
+viser's static client, and the live 3D viewer runs in the lifespan (server/viewer.py).
 Nothing a client sends may produce a 5xx: bodies are size-limited before they are read,
 parsed by hand (400 / 422 with messages that name the field), ids out of range are 404.
 """
@@ -8,13 +9,14 @@ parsed by hand (400 / 422 with messages that name the field), ids out of range a
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import APIRouter, FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
-from fastapi.responses import HTMLResponse, JSONResponse
+from fastapi.responses import JSONResponse
 from sqlalchemy.exc import OperationalError, SQLAlchemyError
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -24,10 +26,10 @@ from modsat_core.spec import JobSpec
 from worker.store import JobStore
 
 from .deps import StoreDep
-from .page import INDEX_HTML
 from .routes_jobs import router as jobs_router
 from .schemas import Health, PresetInfo, PresetSubmission
 from .settings import ServerSettings
+from .viewer import mount_static, start_viewer, viewer_router
 
 log = logging.getLogger("modsat.server")
 
@@ -162,8 +164,10 @@ def _openapi(app: FastAPI):
     return build
 
 
-def create_app(settings: ServerSettings | None = None, store: JobStore | None = None) -> FastAPI:
-    """The API. ``store`` defaults to one opened from ``settings`` (created tables included)."""
+def create_app(settings: ServerSettings | None = None, store: JobStore | None = None,
+               announce: Callable[[str], None] | None = None) -> FastAPI:
+    """The API. ``store`` defaults to one opened from ``settings`` (created tables included);
+    ``announce`` is told the live viewer's address once it runs (``modsat serve`` prints it)."""
     settings = settings or ServerSettings()
 
     @asynccontextmanager
@@ -171,9 +175,15 @@ def create_app(settings: ServerSettings | None = None, store: JobStore | None = 
         own = store is None
         app.state.store = store or JobStore(settings.resolved_db_url, busy_timeout_s=settings.sqlite_busy_timeout_s)
         app.state.store.create_schema()
+        app.state.viewer = start_viewer(settings, app.state.store)
+        if announce is not None:
+            announce(f"port {app.state.viewer.port} (embedded in the page; also http://HOST:{app.state.viewer.port}/)"
+                     if app.state.viewer is not None else "off")
         try:
             yield
         finally:
+            if app.state.viewer is not None:
+                app.state.viewer.stop()
             if own:
                 app.state.store.dispose()
 
@@ -189,10 +199,8 @@ def create_app(settings: ServerSettings | None = None, store: JobStore | None = 
     _install_error_handlers(app)
     app.include_router(jobs_router)
     app.include_router(_misc_router())
-
-    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
-    def index() -> str:
-        return INDEX_HTML
+    app.include_router(viewer_router())
+    mount_static(app, settings)
 
     app.openapi = _openapi(app)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)

@@ -23,7 +23,20 @@ def add_commands(sub) -> None:
     s.add_argument("--host", help="address to listen on (default 127.0.0.1)")
     s.add_argument("--port", type=int, help="port to listen on (default 8000)")
     s.add_argument("--runner", help="what workers run: train (default), or noop / simulated / raise for tests")
+    s.add_argument("--viewer-port", type=int, metavar="PORT",
+                   help="port of the live 3D viewer (default 8080; 0 = any free port; a busy port moves up)")
+    s.add_argument("--no-viewer", action="store_true", help="do not run the live 3D viewer")
     s.set_defaults(func=_cmd_serve)
+
+    v = sub.add_parser("view", help="show runs written by `modsat train --out DIR` in the 3D viewer (no service)")
+    v.add_argument("run_dirs", nargs="+", metavar="RUN_DIR",
+                   help="one run, or two to see them side by side (e.g. RL and GA); more can be picked in the viewer")
+    v.add_argument("--port", type=int, default=8080, help="port of the viewer (default 8080; a busy port moves up)")
+    v.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    v.add_argument("--save", metavar="FILE",
+                   help="write the first run's evaluation recording instead (FILE.viser, or FILE.html: one "
+                        "self-contained page) and exit")
+    v.set_defaults(func=_cmd_view)
 
     w = sub.add_parser("worker", help="run one worker that pulls jobs from the job store at --db URL")
     add_worker_arguments(w)
@@ -68,7 +81,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         print("modsat serve: --workers must be between 0 and 256", file=sys.stderr)
         return 2
     given = {"db_url": args.db, "data_dir": args.data_dir, "host": args.host, "port": args.port,
-             "runner": args.runner}
+             "runner": args.runner, "viewer_port": args.viewer_port, "viewer": False if args.no_viewer else None}
     try:
         settings = ServerSettings(**{k: v for k, v in given.items() if v is not None})
     except ValidationError as exc:
@@ -92,7 +105,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     base = f"http://{shown_host}:{settings.port}"
     print(f"modsat: job store  {store.url_for_humans}", flush=True)
     print(f"modsat: API        {base}/api  (OpenAPI: {base}/api/openapi.json)", flush=True)
-    print(f"modsat: page       {base}/", flush=True)
+    print(f"modsat: web UI     {base}/", flush=True)
     print(f"modsat: {args.workers} local worker(s); add more anywhere with: modsat worker --db URL", flush=True)
 
     env = dict(os.environ, MODSAT_RUNNER=settings.runner)
@@ -101,8 +114,12 @@ def _cmd_serve(args: argparse.Namespace) -> int:
                          env=env, start_new_session=True)  # Ctrl-C reaches us; we stop them in order
         for _ in range(args.workers)
     ]
-    server = uvicorn.Server(uvicorn.Config(create_app(settings), host=settings.host, port=settings.port,
-                                           log_level="info", timeout_graceful_shutdown=3))
+
+    def announce(where: str) -> None:
+        print(f"modsat: 3D viewer  {where.replace('HOST', shown_host)}", flush=True)
+
+    server = uvicorn.Server(uvicorn.Config(create_app(settings, announce=announce), host=settings.host,
+                                           port=settings.port, log_level="info", timeout_graceful_shutdown=3))
     try:
         server.run()
     except (KeyboardInterrupt, SystemExit):  # uvicorn re-raises the Ctrl-C it handled, exits if it cannot bind
@@ -113,3 +130,45 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             _stop_workers(procs, settings.cancel_grace_s + 5.0)
     print("modsat: stopped", flush=True)
     return 0 if server.started else 1
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    """``modsat view RUN_DIR [RUN_DIR ...]``: the live viewer on local runs, until Ctrl-C."""
+    from pathlib import Path
+
+    from modsat_viewer.live import DirRuns, ViewerApp
+
+    try:
+        source = DirRuns(args.run_dirs)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"modsat view: {exc}", file=sys.stderr)
+        return 2
+    if args.save:
+        from modsat_viewer.recording import recording_bytes, recording_html
+
+        run_dir = Path(args.run_dirs[0])
+        spec = run_dir / "spec.json"
+        data = recording_bytes((run_dir / "design.json").read_bytes(), (run_dir / "trajectories.json").read_bytes(),
+                               spec_json=spec.read_bytes() if spec.is_file() else None, title=run_dir.name)
+        out = Path(args.save)
+        if out.suffix.lower() == ".html":
+            data = recording_html(data).encode()
+        out.write_bytes(data)
+        print(f"modsat view: wrote {out} ({len(data):,} bytes)")
+        return 0
+    if not 0 <= args.port <= 65535:
+        print("modsat view: --port must be between 0 and 65535", file=sys.stderr)
+        return 2
+    app = ViewerApp(source, host=args.host, port=args.port, label="modsat view")
+    shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+    names = " vs ".join(Path(p).name for p in args.run_dirs[:2])
+    print(f"modsat view: {names} at http://{shown}:{app.port}/  (Ctrl-C to stop)", flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()
+    return 0
+

@@ -207,7 +207,7 @@ _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactInfo], responses=_ERRORS)
 def list_artifacts(job_id: int, store: StoreDep) -> list[ArtifactInfo]:
     """Files of the job: outputs of a finished run (policy, export, design, evaluation,
-    trajectories, curve) and, while it runs, its latest checkpoint."""
+    trajectories, curve, the `.viser` 3D recording) and, while it runs, its latest checkpoint."""
     if store.job_state(job_id) is None:
         raise _unknown(job_id)
     return [artifact_info(job_id, r) for r in store.list_artifacts(job_id)]

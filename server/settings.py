@@ -24,3 +24,9 @@ class ServerSettings(WorkerSettings):
     sse_max_s: float = Field(
         3600.0, gt=0, le=86_400, description="An event stream ends after this long (clients reconnect)."
     )
+    viewer: bool = Field(True, description="Run the live 3D viewer (viser) inside the API process.")
+    viewer_port: int = Field(
+        8080, ge=0, le=65535,
+        description="Port of the live 3D viewer; 0 = any free port. A busy port moves it up (see GET /api/viewer).",
+    )
+    web_dir: str | None = Field(None, description="Directory of the web UI's files (default: the repository's web/).")

@@ -1,4 +1,5 @@
-"""What a job runs. The default is ``modsat_core.train.train``; the others are real runners
+"""What a job runs. The default is ``modsat_core.train.train`` (through worker/train_runner.py,
+which adds the ``evaluation.viser`` recording to a finished run's files); the others are real runners
 that follow the same contract (docs/train-interface.md) for tests and benchmarks of the
 queue, without the cost of training:
 
@@ -26,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 RUNNERS = {
-    "train": "modsat_core.train:train",
+    "train": "worker.train_runner:train",
     "noop": "worker.runners:noop",
     "simulated": "worker.runners:simulated",
     "raise": "worker.runners:raising",

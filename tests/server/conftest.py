@@ -39,7 +39,8 @@ class ServerProc:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "uvicorn", "server.app:create_app", "--factory", "--host", "127.0.0.1",
              "--port", str(self.port), "--timeout-graceful-shutdown", "2"],
-            cwd=REPO, env={**os.environ, **FAST_ENV, "MODSAT_DB_URL": db_url, **(env or {})},
+            # The live viewer is tested in tests/web; here it would only take a port.
+            cwd=REPO, env={**os.environ, **FAST_ENV, "MODSAT_VIEWER": "false", "MODSAT_DB_URL": db_url, **(env or {})},
             stdout=self._log, stderr=subprocess.STDOUT,
         )
         wait_for(self._up, 30, f"the API server on port {self.port}")

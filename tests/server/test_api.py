@@ -159,7 +159,12 @@ def test_presets_schema_health_and_page(api):
     openapi = api.client.get("/api/openapi.json").json()
     assert "JobSpec" in openapi["components"]["schemas"]
     page = api.client.get("/")
-    assert page.status_code == 200 and "/api/jobs" in page.text
+    assert page.status_code == 200 and "text/html" in page.headers["content-type"] and "app.js" in page.text
+    assert "/api/jobs" in api.client.get("/app.js").text, "the web UI reads the API"
+    assert api.client.get("/viser-client/").status_code == 200, "viser's static client is served"
+    assert api.client.get("/no-such-file.js").status_code == 404
+    assert api.client.get("/api/viewer").json() == {"enabled": False, "port": None, "client": "/viser-client/",
+                                                     "recording": "evaluation.viser"}
 
 
 def test_writes_need_the_bearer_token_when_set(start_server, sqlite_url):

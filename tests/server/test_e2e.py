@@ -25,7 +25,7 @@ TINY_QUICK = {
     },
 }
 OUTPUTS = {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.json", "trajectories.json",
-           "policy.pt", "policy_export.pt"}
+           "policy.pt", "policy_export.pt", "evaluation.viser"}
 
 
 def _read_events(base: str, job_id: int, out: list[tuple[str, str]]) -> None:

@@ -1,0 +1,154 @@
+"""A finished run as the viewer sees it, read from its stored JSON artefacts.
+
+``design.json`` gives the grid (0 empty, 1 structure, 2 actuator); ``trajectories.json``
+gives, per controller (``policy`` and ``pd_baseline``), the time histories of the first few
+evaluation slews (modsat_core.evaluate.monte_carlo): ``t_s`` (T,), ``q_BN`` (T, 4) scalar
+first, ``omega_B`` (T, 3) rad/s, ``h_B`` (T, 3) wheel momentum in N m s, ``error_deg`` (T,),
+``q_TN`` (4,) and the episode's ``metrics``. Both controllers fly the same seeded slews, and
+so do two runs with the same evaluation seed: episode i is comparable across them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Controllers in ``trajectories.json`` and how the viewer names them.
+CONTROLLERS = {"policy": "policy", "pd_baseline": "PD baseline"}
+
+
+def _as_obj(data: bytes | str | dict | list | None) -> Any:
+    if data is None or isinstance(data, (dict, list)):
+        return data
+    return json.loads(data)
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One recorded slew. Arrays are float64; quaternions scalar-first (viser's ``wxyz``)."""
+
+    t_s: np.ndarray  # (T,) s
+    q_BN: np.ndarray  # (T, 4)
+    omega_B: np.ndarray  # (T, 3) rad/s
+    h_B: np.ndarray  # (T, 3) N m s, total wheel momentum in the body frame
+    error_deg: np.ndarray  # (T,) deg
+    q_TN: np.ndarray  # (4,)
+    metrics: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Episode:
+        t = np.asarray(d["t_s"], dtype=np.float64).reshape(-1)
+        n = len(t)
+
+        def arr(key: str, width: int) -> np.ndarray:
+            v = d.get(key)
+            return np.zeros((n, width)) if v is None else np.asarray(v, dtype=np.float64).reshape(n, width)
+
+        err = d.get("error_deg")
+        return cls(t_s=t, q_BN=arr("q_BN", 4), omega_B=arr("omega_B", 3), h_B=arr("h_B", 3),
+                   error_deg=np.zeros(n) if err is None else np.asarray(err, dtype=np.float64).reshape(n),
+                   q_TN=np.asarray(d.get("q_TN", (1.0, 0.0, 0.0, 0.0)), dtype=np.float64).reshape(4),
+                   metrics=dict(d.get("metrics") or {}))
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t_s[-1] - self.t_s[0]) if len(self.t_s) else 0.0
+
+    @property
+    def rate_rad_s(self) -> np.ndarray:
+        """|omega_B|, (T,) rad/s."""
+        return np.linalg.norm(self.omega_B, axis=1)
+
+    @property
+    def wheel_momentum_Nms(self) -> np.ndarray:
+        """|h_B|, (T,) N m s."""
+        return np.linalg.norm(self.h_B, axis=1)
+
+    def index_at(self, t_s: float) -> int:
+        """The last sample at or before ``t_s`` (the first / last one outside the episode)."""
+        if not len(self.t_s):
+            return 0
+        i = int(np.searchsorted(self.t_s, t_s + 1e-9, side="right")) - 1
+        return min(max(i, 0), len(self.t_s) - 1)
+
+    def describe(self) -> str:
+        """One line for a picker: slew angle and outcome."""
+        m = self.metrics
+        angle = m.get("slew_angle_deg")
+        parts = [f"{angle:.0f} deg slew" if isinstance(angle, (int, float)) else "slew"]
+        if m.get("success"):
+            parts.append("success")
+        elif m.get("safety_violation"):
+            parts.append("rate limit hit")
+        err = m.get("final_error_deg")
+        if isinstance(err, (int, float)) and math.isfinite(err):
+            parts.append(f"final error {err:.2f} deg")
+        return ", ".join(parts)
+
+
+@dataclass
+class RunData:
+    """Everything the viewer draws for one run."""
+
+    title: str
+    grid: np.ndarray  # (N, N, N) int: 0 empty, 1 structure, 2 actuator
+    episodes: dict[str, list[Episode]]  # controller -> recorded slews
+    design: dict = field(default_factory=dict)
+    evaluation: dict | None = None
+    spec: dict | None = None
+
+    @classmethod
+    def from_json(cls, design, trajectories, *, evaluation=None, spec=None, title: str | None = None) -> RunData:
+        """From the artefacts' bytes (or already decoded JSON)."""
+        design, trajectories = _as_obj(design), _as_obj(trajectories) or {}
+        evaluation, spec = _as_obj(evaluation), _as_obj(spec)
+        grid = np.asarray(design.get("grid") or [[[0]]], dtype=np.int64)
+        if grid.ndim != 3:
+            raise ValueError(f"design.json: grid must be 3-dimensional, got shape {grid.shape}")
+        episodes = {k: [Episode.from_dict(e) for e in trajectories.get(k) or []] for k in CONTROLLERS}
+        if title is None:
+            title = (spec or {}).get("name") or (spec or {}).get("algorithm") or "run"
+        return cls(title=title, grid=grid, episodes=episodes, design=design, evaluation=evaluation, spec=spec)
+
+    @classmethod
+    def from_dir(cls, path: str | Path, title: str | None = None) -> RunData:
+        """From a directory written by ``modsat train --out DIR``."""
+        p = Path(path)
+        for needed in ("design.json", "trajectories.json"):
+            if not (p / needed).is_file():
+                raise FileNotFoundError(f"{p / needed} is missing: is {p} a directory written by `modsat train`?")
+
+        def opt(name: str) -> bytes | None:
+            f = p / name
+            return f.read_bytes() if f.is_file() else None
+
+        return cls.from_json((p / "design.json").read_bytes(), (p / "trajectories.json").read_bytes(),
+                             evaluation=opt("evaluation.json"), spec=opt("spec.json"), title=title or p.name)
+
+    @property
+    def algorithm(self) -> str:
+        return str((self.spec or {}).get("algorithm") or "")
+
+    @property
+    def short_algorithm(self) -> str:
+        """``RL`` for the TD3 runs, ``GA`` for the genetic algorithm."""
+        a = self.algorithm
+        return "GA" if a == "ga" else ("RL" if a.startswith("td3") else a or "run")
+
+    @property
+    def controllers(self) -> list[str]:
+        """Controllers that have recorded slews, policy first."""
+        return [k for k in CONTROLLERS if self.episodes.get(k)]
+
+    @property
+    def modules(self) -> int:
+        return int((self.grid > 0).sum())
+
+    @property
+    def actuators(self) -> int:
+        return int((self.grid == 2).sum())

@@ -1,0 +1,117 @@
+"""The 3D viewer in the API process, and the web UI's static files.
+
+* The live viewer (modsat_viewer.live) runs in the app's lifespan, in viser's own threads,
+  on ``viewer_port`` (its real port: ``GET /api/viewer``). Its runs are the job store's
+  succeeded jobs (:class:`StoreRuns`).
+* ``/viser-client/`` serves viser's static client (one self-contained HTML file from the
+  installed package). The web page embeds it with ``?websocket=ws://HOST:PORT/?run=ID``
+  (the live viewer) or ``?playbackPath=/api/jobs/ID/artifacts/evaluation.viser`` (a
+  recording, no Python viewer needed).
+* ``/`` serves web/ (plain HTML, JS and CSS; nothing from a CDN).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from fastapi import APIRouter, FastAPI, Request
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, Field
+
+from modsat_viewer.run import RunData
+
+from .settings import ServerSettings
+
+log = logging.getLogger("modsat.server")
+
+REPO_WEB_DIR = Path(__file__).resolve().parents[1] / "web"
+#: Artefacts a job needs to be shown in 3D.
+NEEDED = ("design.json", "trajectories.json")
+
+
+class StoreRuns:
+    """The viewer's runs: succeeded jobs that have a design and trajectories (keys = job ids)."""
+
+    def __init__(self, store, limit: int = 100):
+        self.store, self.limit = store, limit
+
+    def _rows(self) -> list[dict]:
+        _, rows = self.store.list_jobs(statuses=["succeeded"], limit=self.limit, offset=0)
+        return [r for r in rows if all(self.store.artifact_info(r["id"], n) is not None for n in NEEDED)]
+
+    def choices(self) -> list[tuple[str, str]]:
+        out = []
+        for r in self._rows():
+            kind = "GA" if r["algorithm"] == "ga" else "RL"
+            out.append((str(r["id"]), f"#{r['id']} {r['name'] or r['algorithm']} ({kind})"))
+        return out
+
+    def load(self, key: str) -> RunData:
+        try:
+            job_id = int(key)
+        except ValueError:
+            raise KeyError(key) from None
+        row = self.store.get_job(job_id)
+        if row is None or row["status"] != "succeeded":
+            raise KeyError(key)
+        files = {n: self.store.read_artifact(job_id, n) for n in (*NEEDED, "evaluation.json", "spec.json")}
+        if any(files[n] is None for n in NEEDED):
+            raise KeyError(key)
+        return RunData.from_json(files["design.json"], files["trajectories.json"], evaluation=files["evaluation.json"],
+                                 spec=files["spec.json"], title=f"job {job_id} {row['name'] or ''}".strip())
+
+    def defaults(self) -> tuple[str | None, str | None]:
+        rows = self._rows()
+        return (str(rows[0]["id"]) if rows else None, None)
+
+
+def start_viewer(settings: ServerSettings, store):
+    """The live viewer on ``settings.viewer_port``, or None when it is disabled or cannot start."""
+    if not settings.viewer:
+        return None
+    from modsat_viewer.live import ViewerApp
+
+    try:
+        app = ViewerApp(StoreRuns(store), host=settings.host, port=settings.viewer_port)
+    except Exception:  # noqa: BLE001 - the API works without the viewer; say why it is missing
+        log.exception("the 3D viewer could not start; the API runs without it")
+        return None
+    log.info("modsat: 3D viewer on port %d", app.port)
+    return app
+
+
+class ViewerInfo(BaseModel):
+    enabled: bool = Field(description="Whether the live viewer runs in this server.")
+    port: int | None = Field(description="The port it really listens on (same host as the API).")
+    client: str = Field(description="Path of viser's static client on this server (live and recordings).")
+    recording: str = Field(description="Artefact name of a finished job's .viser recording.")
+
+
+def viewer_router() -> APIRouter:
+    r = APIRouter(prefix="/api")
+
+    @r.get("/viewer", response_model=ViewerInfo, tags=["service"])
+    def viewer_info(request: Request) -> ViewerInfo:
+        """Where the live 3D viewer listens. Open `/viser-client/?websocket=ws://HOST:PORT/?run=JOB_ID`
+        (or `http://HOST:PORT/`); a recording plays at `/viser-client/?playbackPath=URL`."""
+        from modsat_viewer.recording import RECORDING_NAME
+
+        v = getattr(request.app.state, "viewer", None)
+        return ViewerInfo(enabled=v is not None, port=v.port if v is not None else None, client="/viser-client/",
+                          recording=RECORDING_NAME)
+
+    return r
+
+
+def mount_static(app: FastAPI, settings: ServerSettings) -> None:
+    """viser's client at /viser-client/, web/ at / (mounted last: the API routes come first)."""
+    import viser
+
+    client_dir = Path(viser.__file__).resolve().parent / "client" / "build"
+    app.mount("/viser-client", StaticFiles(directory=client_dir, html=True), name="viser-client")
+    web = Path(settings.web_dir) if settings.web_dir else REPO_WEB_DIR
+    if web.is_dir():
+        app.mount("/", StaticFiles(directory=web, html=True), name="web")
+    else:
+        log.warning("no web UI: %s is not a directory (set MODSAT_WEB_DIR)", web)

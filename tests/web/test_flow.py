@@ -1,0 +1,188 @@
+"""A person's path through the web UI, in a real headless Chromium: submit the `quick` preset
+from the page (a few hundred env steps), watch it progress to succeeded, read its curves and
+evaluation, open its 3D view, move to the middle of a slew, compare it with a GA run side by
+side, and play its stored `.viser` recording with no Python viewer running. Screenshots go
+to $MODSAT_SCREENSHOTS (default build/screenshots); the 3D ones are checked pixel by pixel
+for the actuator colour."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+
+from tests.worker.helpers import wait_for
+
+from .conftest import DESKTOP, Serve, actuator_pixels, close_webgl_notice, screenshot_dir
+
+# A GA baseline small enough for CI (about 15 s on 2 cores), submitted over the API.
+TINY_GA = {"preset": "quick", "overrides": {
+    "name": "ga-ci", "algorithm": "ga", "ga": {"population_size": 2, "steps_per_design": 48},
+    "training": {"total_env_steps": 96, "learning_starts": 32, "eval_every_steps": 48, "eval_episodes": 2,
+                 "batch_size": 32, "hidden_sizes": [32, 32]},
+    "evaluation": {"episodes": 4, "trajectories": 2}}}
+
+RUN: dict[str, int] = {}  # what the first test made, for the ones after it
+
+
+def _need(*keys: str) -> None:
+    if any(k not in RUN for k in keys):
+        pytest.skip("needs the jobs of test_submit_quick_and_watch_it_finish")
+
+
+def _scene_shot(frame, path) -> bytes:
+    """Screenshot of the WebGL canvas (the 3D scene) inside a viser client frame. viser's
+    notifications are hidden first: the software-WebGL one has an orange bar."""
+    canvas = frame.locator("canvas").first
+    canvas.wait_for(state="visible")
+    frame.locator(".mantine-Notification-root").evaluate_all("els => els.forEach(e => e.style.display = 'none')")
+    png = canvas.screenshot()
+    path.write_bytes(png)
+    return png
+
+
+def _open_3d(page):
+    frame = page.frame_locator("#view-frame")
+    frame.get_by_text("modsat viewer").first.wait_for(timeout=60_000)  # arrives over the websocket
+    close_webgl_notice(frame)
+    time.sleep(2.5)  # software rendering and viser's fade-in
+    return frame
+
+
+def test_submit_quick_and_watch_it_finish(service, new_page):
+    shots = screenshot_dir()
+    page = new_page()
+    page.goto(service.base + "/")
+    page.wait_for_selector("#preset option[value=quick]", state="attached")
+    assert page.input_value("#preset") == "quick"
+    assert '"total_env_steps": 30000' in page.input_value("#overrides"), "the editor holds the preset"
+    page.fill("#f-name", "rl-ci")
+    page.fill("#f-training-total_env_steps", "300")  # form fields write into the JSON editor
+    page.fill("#f-evaluation-episodes", "8")
+    assert '"total_env_steps": 300,' in page.input_value("#overrides")
+    page.click("#submit-btn")
+    page.wait_for_selector("#submit-ok:not([hidden])")
+    job_id = int(re.search(r"#(\d+)", page.text_content("#submit-ok")).group(1))
+    spec = service.client.get(f"/api/jobs/{job_id}").json()["spec"]
+    assert spec["name"] == "rl-ci" and spec["training"]["total_env_steps"] == 300
+    assert spec["evaluation"]["episodes"] == 8 and spec["training"]["num_envs"] == 16, "the rest is the preset"
+    r = service.client.post("/api/jobs", json=TINY_GA)
+    assert r.status_code == 201, r.text
+    RUN["ga"] = r.json()["id"]
+
+    # The list row follows the job: queued -> running (progress growing, over SSE) -> succeeded.
+    row = page.locator(f"#job-{job_id}")
+    statuses, progress = [], []
+    deadline = time.monotonic() + 180
+    while True:
+        st = row.locator(".badge").text_content()
+        pr = row.locator(".progress span").text_content()
+        if not statuses or statuses[-1] != st:
+            statuses.append(st)
+        if not progress or progress[-1] != pr:
+            progress.append(pr)
+        if st == "succeeded":
+            break
+        assert st not in ("failed", "cancelled"), service.client.get(f"/api/jobs/{job_id}").json()["error_detail"]
+        assert time.monotonic() < deadline, f"the quick run did not finish; seen {statuses}, {progress}"
+        time.sleep(0.1)
+    assert "running" in statuses, statuses
+    assert len(progress) >= 3 and progress[-1] == "100 %", f"progress shown live: {progress}"
+    RUN["rl"] = job_id
+
+    # Its page: status, curves, evaluation table, downloads.
+    page.wait_for_function("document.querySelector('#d-status').textContent === 'succeeded'")
+    page.wait_for_selector("#downloads a[href$='evaluation.viser']")
+    page.wait_for_function("Number(document.querySelector('#curves').dataset.points) >= 1")
+    assert page.locator("#curves svg.chart path").count() == 2, "return and success-rate curves are drawn"
+    table = page.text_content("#evaluation")
+    assert "PD baseline" in table and "success rate" in table and "mean return" in table
+    names = page.locator("#downloads a").all_text_contents()
+    assert {"policy.pt", "policy_export.pt", "curve.json", "evaluation.viser"} <= set(names), names
+    page.evaluate("window.scrollTo(0, 0)")
+    page.screenshot(path=str(shots / "job-list.png"))
+    page.locator("#curves").screenshot(path=str(shots / "job-curves.png"))
+    assert page.evaluate("document.scrollingElement.scrollWidth") <= DESKTOP["width"], "no sideways scroll"
+
+
+def test_open_the_3d_view_and_go_mid_slew(service, new_page):
+    _need("rl")
+    shots = screenshot_dir()
+    page = new_page()
+    page.goto(f"{service.base}/#job={RUN['rl']}")
+    page.wait_for_function("document.querySelector('#d-status').textContent === 'succeeded'")
+    page.click("#view-live")
+    frame = _open_3d(page)
+    frame.get_by_text(f"job {RUN['rl']} rl-ci").first.wait_for()  # the job the page asked for
+    png = _scene_shot(frame, shots / "satellite-3d.png")
+    assert actuator_pixels(png) > 2000, "the actuator modules are drawn in their colour"
+
+    # The PD baseline flies the full slew on the same design: go to 1.5 s into it.
+    frame.get_by_role("combobox", name="Controller").click()
+    frame.get_by_role("option", name="PD baseline").click()
+    slider = frame.get_by_role("slider").first
+    slider.focus()
+    for _ in range(18):  # steps of about one control period (1/12 s)
+        slider.press("ArrowRight")
+    frame.get_by_text(re.compile(r"t = 1\.[3-6]\d s")).first.wait_for()
+    text = frame.get_by_text(re.compile(r"RL error [0-9.]+ deg")).first.text_content()
+    err = float(re.search(r"error ([0-9.]+) deg", text).group(1))
+    assert 2.0 < err < 80.0, f"mid-slew: the error is neither the start's nor zero ({text})"
+    time.sleep(1.5)
+    png = _scene_shot(frame, shots / "satellite-mid-slew.png")
+    assert actuator_pixels(png) > 2000
+    page.locator("#view-box").screenshot(path=str(shots / "satellite-mid-slew-page.png"))
+
+
+def test_rl_and_ga_side_by_side(service, new_page):
+    _need("rl", "ga")
+    shots = screenshot_dir()
+    ga = wait_for(lambda: (j := service.client.get(f"/api/jobs/{RUN['ga']}").json())["status"] in (
+        "succeeded", "failed", "cancelled") and j, 180, "the GA job")
+    assert ga["status"] == "succeeded", ga["error_detail"]
+    page = new_page()
+    page.goto(f"{service.base}/#job={RUN['rl']}")
+    page.wait_for_selector(f"#compare option[value='{RUN['ga']}']", state="attached")
+    page.select_option("#compare", str(RUN["ga"]))
+    page.click("#view-live")
+    frame = _open_3d(page)
+    frame.get_by_text(re.compile(r"RL \(job \d+ rl-ci\) vs GA \(job \d+ ga-ci\)")).first.wait_for()
+    png = _scene_shot(frame, shots / "rl-vs-ga.png")
+    left, right = actuator_pixels(png, (0.0, 0.0, 0.5, 1.0)), actuator_pixels(png, (0.5, 0.0, 1.0, 1.0))
+    assert left > 500 and right > 500, f"two satellites, one each side (orange pixels {left}, {right})"
+    page.screenshot(path=str(shots / "rl-vs-ga-page.png"))
+    assert f"compare={RUN['ga']}" in page.url
+
+
+def test_recording_plays_without_a_python_viewer(service, new_page, tmp_path):
+    """The stored .viser file, played by the static client that the app serves, on a server
+    started with --no-viewer (the same job store)."""
+    _need("rl")
+    shots = screenshot_dir()
+    quiet = Serve(service.data_dir, tmp_path / "quiet.log", workers=0, viewer=False)
+    try:
+        assert quiet.client.get("/api/viewer").json()["enabled"] is False
+        rec = quiet.client.get(f"/api/jobs/{RUN['rl']}/artifacts/evaluation.viser")
+        assert rec.status_code == 200 and len(rec.content) > 1000
+        page = new_page()
+        page.goto(f"{quiet.base}/viser-client/?playbackPath=/api/jobs/{RUN['rl']}/artifacts/evaluation.viser")
+        page.wait_for_selector("canvas", state="attached")
+        close_webgl_notice(page)
+        time.sleep(3.5)
+        png = _scene_shot(page, shots / "recording-playback.png")
+        assert actuator_pixels(png) > 2000, "the recording shows the satellite"
+
+        # The same from the web page (the Recording button), live viewer off.
+        page2 = new_page()
+        page2.goto(f"{quiet.base}/#job={RUN['rl']}")
+        page2.wait_for_function("document.querySelector('#d-status').textContent === 'succeeded'")
+        assert page2.is_disabled("#view-live") and "off on this server" in page2.text_content("#view-note")
+        page2.click("#view-rec")
+        frame = page2.frame_locator("#view-frame")
+        frame.locator("canvas").first.wait_for(state="attached")
+        close_webgl_notice(frame)
+        time.sleep(3.5)
+        assert actuator_pixels(_scene_shot(frame, shots / "recording-in-page.png")) > 2000
+    finally:
+        quiet.stop()

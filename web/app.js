@@ -1,0 +1,608 @@
+// The modsat web UI: job list (paginated, live progress over server-sent events), submit form
+// (presets + JSON schema), a job's learning curves, evaluation, downloads and 3D view.
+// Plain JavaScript talking to the REST API under /api; nothing is loaded from elsewhere.
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+const PAGE_SIZE = 20;
+const MAX_LIST_STREAMS = 3; // browsers allow ~6 connections per host; keep room for fetches
+const TERMINAL = new Set(["succeeded", "failed", "cancelled"]);
+// Spec fields shown as form inputs (built from the JSON schema); everything else is in the JSON editor.
+const FIELD_PATHS = ["name", "algorithm", "seed", "training.total_env_steps", "training.num_envs",
+  "training.device", "design.grid_size", "evaluation.episodes"];
+
+const state = {
+  offset: 0, status: "", total: 0,
+  schema: null, presetSpec: null,
+  viewer: null,
+  listStreams: new Map(), // job id -> EventSource
+  selected: null, job: null, detailStream: null, evalPoints: [], curveFromFile: null,
+  view: null, compare: "",
+};
+
+// ------------------------------------------------------------------ helpers
+
+function el(tag, attrs, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k === "class") e.className = v;
+    else if (k === "text") e.textContent = v;
+    else e.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children) if (c !== null && c !== undefined) e.append(c);
+  return e;
+}
+
+function authHeaders() {
+  const t = localStorage.getItem("modsat.token");
+  return t ? { Authorization: "Bearer " + t } : {};
+}
+
+async function api(path, opts) {
+  let r;
+  try {
+    r = await fetch(path, opts);
+  } catch (e) {
+    return { ok: false, status: 0, body: { detail: "cannot reach the server: " + e.message } };
+  }
+  const ct = r.headers.get("content-type") || "";
+  const body = ct.includes("json") ? await r.json().catch(() => null) : await r.text();
+  return { ok: r.ok, status: r.status, body };
+}
+
+function errorText(r) {
+  const b = r.body;
+  if (b && Array.isArray(b.messages)) return b.messages.join("\n");
+  if (b && typeof b.detail === "string") return b.detail;
+  return `HTTP ${r.status}`;
+}
+
+const fmt = {
+  int: (v) => (v == null ? "-" : Math.round(v).toLocaleString("en")),
+  pct: (v) => (v == null ? "-" : (100 * v).toFixed(0) + " %"),
+  num: (d) => (v) => (v == null || !Number.isFinite(v) ? "-" : v.toFixed(d)),
+  bytes: (n) => (n < 1024 ? n + " B" : n < 1048576 ? (n / 1024).toFixed(1) + " KiB" : (n / 1048576).toFixed(1) + " MiB"),
+};
+
+function getPath(obj, path) {
+  return path.split(".").reduce((o, k) => (o && typeof o === "object" ? o[k] : undefined), obj);
+}
+
+function setPath(obj, path, value) {
+  const keys = path.split(".");
+  let o = obj;
+  for (const k of keys.slice(0, -1)) {
+    if (!o[k] || typeof o[k] !== "object") o[k] = {};
+    o = o[k];
+  }
+  o[keys[keys.length - 1]] = value;
+}
+
+// ------------------------------------------------------------------ routing (#job=ID&view=live&compare=ID)
+
+function readHash() {
+  const q = new URLSearchParams(location.hash.slice(1));
+  return { job: q.get("job"), view: q.get("view"), compare: q.get("compare") || "" };
+}
+
+function writeHash() {
+  const q = new URLSearchParams();
+  if (state.selected) q.set("job", state.selected);
+  if (state.view) q.set("view", state.view);
+  if (state.compare) q.set("compare", state.compare);
+  const h = "#" + q.toString();
+  if (location.hash !== h) history.replaceState(null, "", h === "#" ? location.pathname : h);
+}
+
+// ------------------------------------------------------------------ job list
+
+function progressCell(job) {
+  const p = job.progress;
+  const pct = Math.round(100 * p.fraction);
+  return el("div", { class: "progress", title: `${fmt.int(p.env_steps)} / ${fmt.int(p.total_env_steps)} env steps` },
+    el("div", { style: `width:${pct}%` }), el("span", { text: pct + " %" }));
+}
+
+function statusBadge(job) {
+  const s = job.status + (job.cancel_requested && job.status === "running" ? " (cancelling)" : "");
+  return el("span", { class: "badge " + job.status, text: s });
+}
+
+function renderRows(items) {
+  const rows = $("job-rows");
+  rows.replaceChildren();
+  for (const j of items) {
+    const ret = j.last_eval && j.last_eval.mean_return != null ? j.last_eval.mean_return.toFixed(1) : "";
+    const tr = el("tr", { id: "job-" + j.id, tabindex: "0", "data-id": j.id,
+      class: String(j.id) === String(state.selected) ? "selected" : null },
+      el("td", { class: "num", text: j.id }), el("td", { text: j.name || "" }),
+      el("td", { class: "opt", text: j.algorithm }), el("td", {}, statusBadge(j)),
+      el("td", {}, progressCell(j)), el("td", { class: "opt num", text: ret }));
+    const open = () => selectJob(j.id).then(() => {
+      if (window.innerWidth <= 900) $("detail").scrollIntoView({ block: "start" }); // one column: show it
+    });
+    tr.addEventListener("click", open);
+    tr.addEventListener("keydown", (e) => { if (e.key === "Enter") open(); });
+    rows.append(tr);
+  }
+  if (!items.length) rows.append(el("tr", {}, el("td", { colspan: "6", class: "hint", text: "no jobs" })));
+}
+
+async function loadJobs() {
+  const q = new URLSearchParams({ limit: PAGE_SIZE, offset: state.offset });
+  if (state.status) q.append("status", state.status);
+  const r = await api("/api/jobs?" + q);
+  if (!r.ok) {
+    $("page-info").textContent = "cannot list the jobs: " + errorText(r);
+    return;
+  }
+  const page = r.body;
+  state.total = page.total;
+  if (state.offset > 0 && state.offset >= page.total) {
+    state.offset = Math.max(0, Math.floor((page.total - 1) / PAGE_SIZE) * PAGE_SIZE);
+    return loadJobs();
+  }
+  renderRows(page.items);
+  $("page-info").textContent = page.total
+    ? `${page.offset + 1}\u2013${page.offset + page.items.length} of ${page.total}` : "no jobs yet";
+  $("prev-page").disabled = state.offset === 0;
+  $("next-page").disabled = page.next_offset == null;
+  syncListStreams(page.items);
+}
+
+function updateRow(id, fields) {
+  const tr = $("job-" + id);
+  if (!tr) return;
+  if (fields.progress) tr.children[4].replaceChildren(progressCell(fields));
+  if (fields.status) tr.children[3].replaceChildren(statusBadge(fields));
+  if (fields.last_eval && fields.last_eval.mean_return != null) {
+    tr.children[5].textContent = fields.last_eval.mean_return.toFixed(1);
+  }
+}
+
+// One event stream per running job on the page (at most MAX_LIST_STREAMS), for live progress.
+function syncListStreams(items) {
+  const want = new Map(items.filter((j) => j.status === "running")
+    .slice(0, MAX_LIST_STREAMS).map((j) => [String(j.id), j]));
+  for (const [id, es] of state.listStreams) {
+    if (!want.has(id)) { es.close(); state.listStreams.delete(id); }
+  }
+  for (const [id, job] of want) {
+    if (state.listStreams.has(id)) continue;
+    let last = job;
+    const es = openEvents(id, 0, {
+      metrics: (m) => {
+        const total = m.total_env_steps || last.progress.total_env_steps;
+        last = { ...last, progress: { ...last.progress, env_steps: m.env_steps, total_env_steps: total,
+          fraction: total ? Math.min(1, m.env_steps / total) : 0 } };
+        if (m.eval) last.last_eval = m.eval;
+        updateRow(id, last);
+      },
+      status: (s) => { last = s; updateRow(id, s); },
+      end: () => { state.listStreams.delete(id); loadJobs(); },
+    });
+    state.listStreams.set(id, es);
+  }
+}
+
+function openEvents(id, after, on) {
+  const es = new EventSource(`/api/jobs/${id}/events?after=${after}`);
+  es.addEventListener("metrics", (e) => on.metrics && on.metrics(JSON.parse(e.data)));
+  es.addEventListener("status", (e) => on.status && on.status(JSON.parse(e.data)));
+  es.addEventListener("end", (e) => { es.close(); on.end && on.end(JSON.parse(e.data)); });
+  // "timeout": the server ends long streams; EventSource reconnects by itself with Last-Event-ID.
+  return es;
+}
+
+// ------------------------------------------------------------------ submit form
+
+function resolve(node) {
+  let n = node || {};
+  for (let i = 0; i < 10; i++) {
+    if (n.$ref) n = state.schema.$defs[n.$ref.split("/").pop()] || {};
+    else if (n.allOf && n.allOf.length === 1) n = { ...n.allOf[0], description: n.description };
+    else if (n.anyOf) n = { ...(n.anyOf.find((a) => a.type !== "null") || {}), description: n.description };
+    else return n;
+  }
+  return n;
+}
+
+function schemaAt(path) {
+  let node = state.schema;
+  for (const key of path.split(".")) {
+    const props = resolve(node).properties;
+    if (!props || !props[key]) return null;
+    node = props[key];
+  }
+  const r = resolve(node);
+  return { ...r, description: node.description || r.description, title: node.title || r.title };
+}
+
+function buildFields() {
+  const box = $("fields");
+  box.replaceChildren();
+  for (const path of FIELD_PATHS) {
+    const s = schemaAt(path);
+    if (!s) continue;
+    const value = getPath(state.presetSpec, path);
+    let input;
+    if (s.enum) {
+      input = el("select", {}, ...s.enum.map((v) => el("option", { value: v, text: v })));
+      input.value = value;
+    } else if (s.type === "integer" || s.type === "number") {
+      input = el("input", { type: "number", step: s.type === "integer" ? "1" : "any",
+        min: s.minimum ?? s.exclusiveMinimum, max: s.maximum ?? s.exclusiveMaximum });
+      input.value = value ?? "";
+    } else {
+      input = el("input", { type: "text", maxlength: s.maxLength });
+      input.value = value ?? "";
+    }
+    input.id = "f-" + path.replace(/\./g, "-");
+    input.dataset.path = path;
+    input.dataset.kind = s.type || "string";
+    input.addEventListener("input", () => fieldToJson(input));
+    input.addEventListener("change", () => fieldToJson(input));
+    const label = el("label", { for: input.id, title: s.description || "" }, path);
+    const err = el("small", { class: "field-error", id: "err-" + path.replace(/\./g, "-") });
+    box.append(el("div", { class: "field" }, label, input, err));
+  }
+}
+
+function fieldValue(input) {
+  const v = input.value;
+  if (input.dataset.kind === "integer" || input.dataset.kind === "number") {
+    if (v.trim() === "") return null;
+    const n = Number(v);
+    return Number.isFinite(n) ? n : v;
+  }
+  if (input.dataset.path === "name" && v === "") return null;
+  return v;
+}
+
+function fieldToJson(input) {
+  let spec;
+  try { spec = JSON.parse($("overrides").value); } catch { return; } // the editor's own error shows on submit
+  setPath(spec, input.dataset.path, fieldValue(input));
+  $("overrides").value = JSON.stringify(spec, null, 2);
+}
+
+function jsonToFields() {
+  let spec;
+  try { spec = JSON.parse($("overrides").value); } catch { return; }
+  for (const input of $("fields").querySelectorAll("[data-path]")) {
+    const v = getPath(spec, input.dataset.path);
+    if (document.activeElement !== input) input.value = v ?? "";
+  }
+}
+
+async function choosePreset(name) {
+  const r = await api("/api/presets/" + encodeURIComponent(name));
+  if (!r.ok) { showSubmitErrors([errorText(r)]); return; }
+  state.presetSpec = r.body;
+  $("overrides").value = JSON.stringify(r.body, null, 2);
+  const info = $("preset").selectedOptions[0];
+  $("preset-info").textContent = info ? info.title : "";
+  buildFields();
+  clearSubmitMessages();
+}
+
+async function loadPresets() {
+  const [p, s] = await Promise.all([api("/api/presets"), api("/api/schema")]);
+  if (!p.ok || !s.ok) { showSubmitErrors(["cannot load the presets: " + errorText(p.ok ? s : p)]); return; }
+  state.schema = s.body;
+  const sel = $("preset");
+  sel.replaceChildren(...p.body.map((x) => el("option", { value: x.name,
+    title: `${x.algorithm}, ${x.grid_size}x${x.grid_size}x${x.grid_size} grid, ${fmt.int(x.total_env_steps)} env steps`,
+    text: `${x.name} (${x.algorithm}, ${fmt.int(x.total_env_steps)} steps)` })));
+  sel.value = p.body.some((x) => x.name === "quick") ? "quick" : p.body[0].name;
+  await choosePreset(sel.value);
+}
+
+// What differs from the preset: sent as overrides (nested objects merge on the server).
+function diff(base, edited) {
+  const isObj = (x) => x && typeof x === "object" && !Array.isArray(x);
+  if (isObj(base) && isObj(edited)) {
+    const out = {};
+    for (const k of Object.keys(edited)) {
+      const d = diff(base[k], edited[k]);
+      if (d !== undefined) out[k] = d;
+    }
+    return Object.keys(out).length ? out : undefined;
+  }
+  return JSON.stringify(base) === JSON.stringify(edited) ? undefined : edited;
+}
+
+function clearSubmitMessages() {
+  $("submit-errors").hidden = true;
+  $("submit-errors").replaceChildren();
+  $("submit-ok").hidden = true;
+  for (const e of document.querySelectorAll(".field-error")) e.textContent = "";
+  for (const i of document.querySelectorAll("[aria-invalid]")) i.removeAttribute("aria-invalid");
+}
+
+function showSubmitErrors(messages, detail) {
+  const box = $("submit-errors");
+  box.replaceChildren(el("strong", { text: "The spec was not accepted:" }),
+    el("ul", {}, ...messages.map((m) => el("li", { text: m }))));
+  box.hidden = false;
+  for (const d of detail || []) {
+    const loc = (d.loc || []).filter((x) => x !== "body" && x !== "overrides").join(".");
+    const input = document.querySelector(`[data-path="${CSS.escape(loc)}"]`);
+    if (input) {
+      input.setAttribute("aria-invalid", "true");
+      const err = $("err-" + loc.replace(/\./g, "-"));
+      if (err) err.textContent = d.msg.replace(loc + ": ", "");
+    }
+  }
+}
+
+async function submitForm(ev) {
+  ev.preventDefault();
+  clearSubmitMessages();
+  let edited;
+  try {
+    edited = JSON.parse($("overrides").value);
+  } catch (e) {
+    showSubmitErrors(["the spec is not valid JSON: " + e.message]);
+    return;
+  }
+  if (!edited || typeof edited !== "object" || Array.isArray(edited)) {
+    showSubmitErrors(["the spec must be a JSON object"]);
+    return;
+  }
+  const body = { preset: $("preset").value, overrides: diff(state.presetSpec, edited) || {} };
+  $("submit-btn").disabled = true;
+  const r = await api("/api/jobs", { method: "POST", body: JSON.stringify(body),
+    headers: { "content-type": "application/json", ...authHeaders() } });
+  $("submit-btn").disabled = false;
+  if (!r.ok) {
+    const detail = r.body && Array.isArray(r.body.detail) ? r.body.detail : [];
+    let msgs = r.body && Array.isArray(r.body.messages) ? r.body.messages : [errorText(r)];
+    if (r.status === 401) msgs = [...msgs, "Set the API token (top right) and submit again."];
+    showSubmitErrors(msgs, detail);
+    return;
+  }
+  $("submit-ok").textContent = `Job #${r.body.id} queued.`;
+  $("submit-ok").hidden = false;
+  state.offset = 0;
+  await loadJobs();
+  selectJob(r.body.id);
+}
+
+// ------------------------------------------------------------------ job detail
+
+function renderHead(job) {
+  state.job = job;
+  $("detail-h").textContent = `Job #${job.id}` + (job.name ? ` \u2014 ${job.name}` : "");
+  const b = $("d-status");
+  b.className = "badge " + job.status;
+  b.textContent = job.status + (job.cancel_requested && job.status === "running" ? " (cancelling)" : "");
+  $("d-meta").textContent = `${job.algorithm}, created ${new Date(job.created_at).toLocaleString()}` +
+    (job.attempt > 1 ? `, attempt ${job.attempt}` : "");
+  $("cancel-btn").hidden = TERMINAL.has(job.status);
+  renderProgress(job.progress, job.latest_metrics);
+  const err = $("d-error");
+  err.hidden = !job.error;
+  err.textContent = job.error || "";
+  if (job.error_detail) err.append(el("details", {}, el("summary", { text: "traceback" }),
+    el("pre", { text: job.error_detail })));
+}
+
+function renderProgress(p, m) {
+  $("d-bar").style.width = `${Math.round(100 * p.fraction)}%`;
+  const parts = [`${fmt.int(p.env_steps)} / ${fmt.int(p.total_env_steps)} env steps`,
+    `${Math.round(100 * p.fraction)} %`];
+  if (p.phase) parts.push(p.phase);
+  if (m && m.elapsed_s != null) parts.push(`${m.elapsed_s.toFixed(0)} s`);
+  $("d-progress").textContent = parts.join(" \u00b7 ");
+}
+
+function drawCurves() {
+  const pts = state.curveFromFile || state.evalPoints;
+  const box = $("curves");
+  const ret = pts.map((p) => [p.env_steps, p.mean_return]);
+  const succ = pts.map((p) => [p.env_steps, 100 * (p.success_rate ?? 0)]);
+  box.replaceChildren(
+    window.modsatCharts.lineChart([{ name: "return", color: "#1f77b4", points: ret }],
+      { title: "mean evaluation return", xLabel: "environment steps", yLabel: "return" }),
+    window.modsatCharts.lineChart([{ name: "success", color: "#2ca02c", points: succ }],
+      { title: "success rate", xLabel: "environment steps", yLabel: "%", yMin: 0, yMax: 100 }));
+  box.dataset.points = String(pts.length);
+}
+
+function evalTable(ev) {
+  const pol = ev.policy && ev.policy.summary, pd = ev.pd_baseline && ev.pd_baseline.summary;
+  const cols = [["policy", pol], ["PD baseline", pd]].filter((c) => c[1]);
+  const tolKeys = Object.keys(pol || {}).filter((k) => k.startsWith("success_rate_at_"));
+  const rows = [
+    ["slews", "episodes", fmt.int],
+    ["success rate (mission tolerance)", "success_rate", fmt.pct],
+    ...tolKeys.map((k) => [`success within ${k.slice(16).replace("_deg", "")} deg`, k, fmt.pct]),
+    ["mean return", "mean_return", (v, s) => (v == null ? "-" : `${v.toFixed(1)} \u00b1 ${(s.std_return ?? 0).toFixed(1)}`)],
+    ["median final error (deg)", "median_final_error_deg", fmt.num(3)],
+    ["median settling time (s)", "median_settling_time_s", fmt.num(2)],
+    ["median slew time / eigenaxis bound", "median_slew_time_ratio", fmt.num(2)],
+    ["median effort (N m s)", "median_effort_Nms", fmt.num(4)],
+    ["max peak rate (rad/s)", "max_peak_rate_rad_s", fmt.num(3)],
+    ["rate-limit violations", "safety_violations", fmt.int],
+  ];
+  return el("table", { class: "eval" },
+    el("thead", {}, el("tr", {}, el("th", { text: "" }), ...cols.map((c) => el("th", { class: "num", text: c[0] })))),
+    el("tbody", {}, ...rows.map(([name, key, f]) => el("tr", {}, el("th", { text: name }),
+      ...cols.map((c) => el("td", { class: "num", text: f(c[1][key], c[1]) }))))));
+}
+
+function designLine(d) {
+  if (!d) return null;
+  const parts = [`${d.modules} modules`, `${d.actuators} actuators`];
+  if (d.mass_kg != null) parts.push(`${d.mass_kg.toFixed(1)} kg`);
+  if (d.principal_inertia_kgm2) parts.push("principal inertia " +
+    d.principal_inertia_kgm2.map((v) => v.toFixed(4)).join(", ") + " kg m\u00b2");
+  if (d.valid === false) parts.push("not a valid satellite");
+  return el("p", { class: "hint", text: "Design: " + parts.join(", ") });
+}
+
+async function renderFiles(job, files) {
+  const names = new Set(files.map((f) => f.name));
+  const ul = $("downloads");
+  ul.replaceChildren(...files.map((f) => el("li", {},
+    el("a", { href: f.url, download: `modsat-job-${job.id}-${f.name}`, text: f.name }),
+    el("span", { class: "hint", text: ` ${fmt.bytes(f.size)} (${f.kind})` }))));
+  if (!files.length) ul.append(el("li", { class: "hint", text: "no files yet" }));
+
+  const evBox = $("evaluation");
+  if (names.has("evaluation.json")) {
+    const r = await api(`/api/jobs/${job.id}/artifacts/evaluation.json`);
+    evBox.replaceChildren(...(r.ok ? [designLine(job.evaluation && job.evaluation.design), evalTable(r.body)]
+      : [el("p", { class: "errors", text: errorText(r) })]).filter(Boolean));
+  } else {
+    evBox.replaceChildren(el("p", { class: "hint", text: TERMINAL.has(job.status)
+      ? "no evaluation for this job" : "the Monte-Carlo evaluation comes when the run has finished" }));
+  }
+  if (names.has("curve.json")) {
+    const r = await api(`/api/jobs/${job.id}/artifacts/curve.json`);
+    if (r.ok && r.body && Array.isArray(r.body.points)) state.curveFromFile = r.body.points;
+  }
+  drawCurves();
+
+  const has3d = names.has("design.json") && names.has("trajectories.json");
+  const hasRec = names.has("evaluation.viser");
+  $("view-live").disabled = !has3d || !(state.viewer && state.viewer.enabled);
+  $("view-rec").disabled = !hasRec;
+  $("view-note").textContent = !has3d ? "The 3D view is there once the run has succeeded."
+    : !(state.viewer && state.viewer.enabled) ? "The live viewer is off on this server (--no-viewer); the recording still plays."
+    : "Live: pick slews, play them, see the time plots; compare with another run side by side. "
+      + "Recording: the stored replay of the evaluation slews (policy beside the PD baseline).";
+  return has3d;
+}
+
+async function loadCompareOptions() {
+  const r = await api("/api/jobs?status=succeeded&limit=100");
+  const sel = $("compare");
+  const keep = state.compare;
+  sel.replaceChildren(el("option", { value: "", text: "(none)" }));
+  if (r.ok) {
+    for (const j of r.body.items) {
+      if (String(j.id) === String(state.selected)) continue;
+      sel.append(el("option", { value: j.id, text: `#${j.id} ${j.name || ""} (${j.algorithm === "ga" ? "GA" : "RL"})` }));
+    }
+  }
+  sel.value = keep;
+  if (sel.value !== keep) state.compare = "";
+}
+
+function showView(mode) {
+  const id = state.selected;
+  if (!id || !mode) {
+    $("view-box").hidden = true;
+    $("view-frame").removeAttribute("src");
+    state.view = null;
+    writeHash();
+    return;
+  }
+  let src;
+  if (mode === "live") {
+    const q = new URLSearchParams({ run: id });
+    if (state.compare) q.set("compare", state.compare);
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    const ws = `${proto}://${location.hostname}:${state.viewer.port}/?${q}`;
+    src = "/viser-client/?websocket=" + encodeURIComponent(ws);
+  } else {
+    src = "/viser-client/?playbackPath=" + encodeURIComponent(`/api/jobs/${id}/artifacts/evaluation.viser`);
+  }
+  state.view = mode;
+  $("view-live").classList.toggle("active", mode === "live");
+  $("view-rec").classList.toggle("active", mode === "recording");
+  $("view-box").hidden = false;
+  if ($("view-frame").getAttribute("src") !== src) $("view-frame").src = src;
+  writeHash();
+}
+
+async function selectJob(id, view) {
+  id = String(id);
+  const changed = id !== String(state.selected);
+  state.selected = id;
+  if (changed) {
+    state.evalPoints = [];
+    state.curveFromFile = null;
+    if (view === undefined) state.view = null;
+  }
+  if (view !== undefined) state.view = view;
+  for (const tr of document.querySelectorAll("#job-rows tr")) tr.classList.toggle("selected", tr.dataset.id === id);
+  if (state.detailStream) { state.detailStream.close(); state.detailStream = null; }
+  const [jr, fr, mr] = await Promise.all([api(`/api/jobs/${id}`), api(`/api/jobs/${id}/artifacts`),
+    api(`/api/jobs/${id}/metrics?after=0&limit=5000`)]);
+  if (String(state.selected) !== id) return; // another job was picked meanwhile
+  $("detail-empty").hidden = jr.ok;
+  $("detail-body").hidden = !jr.ok;
+  if (!jr.ok) {
+    $("detail-empty").textContent = errorText(jr);
+    return;
+  }
+  const job = jr.body;
+  renderHead(job);
+  state.evalPoints = mr.ok ? mr.body.items.filter((m) => m.eval).map((m) => m.eval) : [];
+  const has3d = await renderFiles(job, fr.ok ? fr.body : []);
+  await loadCompareOptions();
+  showView(has3d && (state.view === "live" ? !$("view-live").disabled : state.view === "recording" ? !$("view-rec").disabled : false)
+    ? state.view : null);
+  writeHash();
+  if (!TERMINAL.has(job.status)) followJob(job, mr.ok ? mr.body.last_seq : 0);
+}
+
+function followJob(job, after) {
+  const id = String(job.id);
+  state.detailStream = openEvents(id, after, {
+    metrics: (m) => {
+      if (String(state.selected) !== id) return;
+      const total = m.total_env_steps || job.progress.total_env_steps;
+      renderProgress({ ...job.progress, env_steps: m.env_steps, total_env_steps: total, phase: m.phase,
+        fraction: total ? Math.min(1, m.env_steps / total) : 0 }, m);
+      if (m.eval) { state.evalPoints.push(m.eval); drawCurves(); }
+    },
+    status: (s) => { if (String(state.selected) === id) renderHead({ ...state.job, ...s }); },
+    end: () => {
+      if (String(state.selected) === id) { state.detailStream = null; selectJob(id); }
+      loadJobs();
+    },
+  });
+}
+
+async function cancelSelected() {
+  const r = await api(`/api/jobs/${state.selected}/cancel`, { method: "POST", headers: authHeaders() });
+  if (!r.ok) { $("d-error").hidden = false; $("d-error").textContent = errorText(r); }
+  selectJob(state.selected);
+  loadJobs();
+}
+
+// ------------------------------------------------------------------ start
+
+async function main() {
+  $("token").value = localStorage.getItem("modsat.token") || "";
+  $("token").addEventListener("change", () => localStorage.setItem("modsat.token", $("token").value.trim()));
+  $("prev-page").addEventListener("click", () => { state.offset = Math.max(0, state.offset - PAGE_SIZE); loadJobs(); });
+  $("next-page").addEventListener("click", () => { state.offset += PAGE_SIZE; loadJobs(); });
+  $("status-filter").addEventListener("change", (e) => { state.status = e.target.value; state.offset = 0; loadJobs(); });
+  $("preset").addEventListener("change", (e) => choosePreset(e.target.value));
+  $("reset-btn").addEventListener("click", () => choosePreset($("preset").value));
+  $("overrides").addEventListener("input", jsonToFields);
+  $("submit-form").addEventListener("submit", submitForm);
+  $("cancel-btn").addEventListener("click", cancelSelected);
+  $("view-live").addEventListener("click", () => showView("live"));
+  $("view-rec").addEventListener("click", () => showView("recording"));
+  $("compare").addEventListener("change", (e) => {
+    state.compare = e.target.value;
+    if (state.view === "live") showView("live"); else writeHash();
+  });
+
+  const v = await api("/api/viewer");
+  state.viewer = v.ok ? v.body : { enabled: false };
+  const h = readHash();
+  state.compare = h.compare;
+  await Promise.all([loadJobs(), loadPresets()]);
+  if (h.job) await selectJob(h.job, h.view || null);
+  setInterval(() => { if (!document.hidden) loadJobs(); }, 3000);
+}
+
+main();
