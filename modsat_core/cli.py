@@ -20,6 +20,31 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_learning(args: argparse.Namespace) -> int:
+    from .bench_learning import bench_learn, bench_rl_vs_ga
+
+    spec = _load_spec(args)
+
+    def log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    if args.what == "learn":
+        report = bench_learn(spec, args.seeds, args.out, log)
+    else:
+        if spec.algorithm != "td3-codesign":
+            raise SystemExit("modsat bench rl-vs-ga: give a td3-codesign spec; its GA twin is derived from it")
+        report = bench_rl_vs_ga(spec, args.seeds, args.population, args.steps_per_design, args.out, log)
+    text = json.dumps(report, indent=2)
+    if args.out:
+        import os
+
+        os.makedirs(args.out, exist_ok=True)
+        with open(os.path.join(args.out, f"bench-{args.what}.json"), "w") as fh:
+            fh.write(text + "\n")
+    print(text)
+    return 0
+
+
 def _cmd_presets(args: argparse.Namespace) -> int:
     from .presets import PRESETS, get_preset
 
@@ -225,6 +250,20 @@ def build_parser() -> argparse.ArgumentParser:
     bs.add_argument("--seconds", type=float, default=2.0, help="minimum timing per case")
     bs.add_argument("--dtype", choices=["float32", "float64"], default="float32")
     bs.set_defaults(func=_cmd_bench)
+    for what, text in (("learn", "train a spec over several seeds: wall time, success at 0.25/1 deg, PD comparison"),
+                       ("rl-vs-ga", "RL co-design vs the GA baseline at the same env-step budget, several seeds")):
+        bl = bsub.add_parser(what, help=text)
+        bl.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
+        bl.add_argument("--preset", help="a named preset (see `modsat presets`)")
+        bl.add_argument("--steps", type=int, help="override training.total_env_steps")
+        bl.add_argument("--device", choices=["auto", "cpu", "cuda"], help="override training.device")
+        bl.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds to run (default 0 1 2)")
+        bl.add_argument("--out", help="also write each run's outputs and the JSON report here")
+        if what == "rl-vs-ga":
+            bl.add_argument("--population", type=int, default=6, help="GA population size (default 6)")
+            bl.add_argument("--steps-per-design", type=int, default=10_000,
+                            help="GA: TD3 env steps per evaluated design (default 10,000)")
+        bl.set_defaults(func=_cmd_bench_learning, seed=None)
 
     pr = sub.add_parser("presets", help="list the named presets, or print one as JSON")
     pr.add_argument("name", nargs="?")
