@@ -1,7 +1,6 @@
 """The `modsat` command line, run as a real subprocess."""
 
 import json
-import os
 import subprocess
 import sys
 

@@ -28,7 +28,41 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-class ServerProc:
+class HttpProc:
+    """A server subprocess (``self.proc``, its output in ``self.log_path``) that answers
+    ``GET /api/health``; ``stop()`` sends SIGINT (to its process group if ``group``), then
+    SIGKILL after ``stop_timeout_s``."""
+
+    group = False
+    stop_timeout_s = 15.0
+
+    def _up(self) -> bool:
+        if self.proc.poll() is not None:
+            raise AssertionError(f"{self.proc.args[:2]} exited:\n{self.log_path.read_text(errors='replace')}")
+        try:
+            return httpx.get(f"{self.base}/api/health", timeout=2).status_code == 200
+        except httpx.HTTPError:
+            return False
+
+    def _signal(self, sig: int) -> None:
+        if self.group:
+            os.killpg(self.proc.pid, sig)
+        else:
+            self.proc.send_signal(sig)
+
+    def stop(self) -> None:
+        self.client.close()
+        if self.proc.poll() is None:
+            self._signal(signal.SIGINT)
+            try:
+                self.proc.wait(self.stop_timeout_s)
+            except subprocess.TimeoutExpired:
+                self._signal(signal.SIGKILL)
+                self.proc.wait()
+        self._log.close()
+
+
+class ServerProc(HttpProc):
     """``uvicorn server.app:create_app --factory`` with the given settings."""
 
     def __init__(self, db_url: str, log_path: Path, env: dict[str, str] | None = None):
@@ -46,24 +80,6 @@ class ServerProc:
         wait_for(self._up, 30, f"the API server on port {self.port}")
         self.client = httpx.Client(base_url=self.base, timeout=30)
 
-    def _up(self) -> bool:
-        if self.proc.poll() is not None:
-            raise AssertionError(f"the server exited:\n{self.log_path.read_text()}")
-        try:
-            return httpx.get(f"{self.base}/api/health", timeout=2).status_code == 200
-        except httpx.HTTPError:
-            return False
-
-    def stop(self) -> None:
-        self.client.close()
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self._log.close()
 
 
 @pytest.fixture

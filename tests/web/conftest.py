@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import io
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -18,7 +17,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.server.conftest import free_port
+from tests.server.conftest import HttpProc, free_port
 from tests.worker.helpers import REPO, wait_for
 
 CHROMIUM = os.environ.get("MODSAT_CHROMIUM", "/usr/bin/chromium")
@@ -59,8 +58,12 @@ def actuator_pixels(png: bytes, box: tuple[float, float, float, float] | None = 
     return int(mask.sum())
 
 
-class Serve:
-    """``modsat serve`` on free ports with its own data directory."""
+class Serve(HttpProc):
+    """``modsat serve`` on free ports with its own data directory (and its worker processes,
+    hence the process group)."""
+
+    group = True
+    stop_timeout_s = 30.0
 
     def __init__(self, data_dir: Path, log_path: Path, *, workers: int = 1, viewer: bool = True):
         self.port = free_port()
@@ -75,25 +78,6 @@ class Serve:
                                      start_new_session=True)
         wait_for(self._up, 60, f"modsat serve on port {self.port}")
         self.client = httpx.Client(base_url=self.base, timeout=30)
-
-    def _up(self) -> bool:
-        if self.proc.poll() is not None:
-            raise AssertionError(f"modsat serve exited:\n{self.log_path.read_text(errors='replace')}")
-        try:
-            return httpx.get(f"{self.base}/api/health", timeout=2).status_code == 200
-        except httpx.HTTPError:
-            return False
-
-    def stop(self) -> None:
-        self.client.close()
-        if self.proc.poll() is None:
-            os.killpg(self.proc.pid, signal.SIGINT)
-            try:
-                self.proc.wait(30)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
-        self._log.close()
 
     def log(self) -> str:
         return self.log_path.read_text(errors="replace")

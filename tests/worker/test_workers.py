@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import signal
 
-import pytest
 
 from modsat_core.presets import get_preset
 from modsat_core.spec import parse_spec
