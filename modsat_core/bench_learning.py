@@ -55,7 +55,8 @@ def run_one(spec: JobSpec, out_dir: str | None = None, log=None) -> dict:
     s = res.summary
     return {
         "seed": spec.seed, "algorithm": spec.algorithm, "wall_s": round(wall, 1), "env_steps": res.env_steps,
-        "updates": last.get("updates"), "env_steps_per_s": round(res.env_steps / wall, 1),
+        # A GA run's updates are per inner controller, not one count: not reported.
+        "updates": last.get("updates") if spec.algorithm != "ga" else None, "env_steps_per_s": round(res.env_steps / wall, 1),
         "design": s["design"], "designs_evaluated": s.get("designs_evaluated"),
         "policy": _pick(s["policy"]), "pd_baseline": _pick(s["pd_baseline"]),
     }

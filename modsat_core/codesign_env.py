@@ -23,7 +23,7 @@ from torch import Tensor
 
 from .features import CellObs, PhysState, cell_observation
 from .mission import draw_episode, return_bounds
-from .morphology import ACTUATOR, mass_properties_batched, valid_mask_batched
+from .morphology import ACTUATOR, mass_properties_batched, seed_component_batched, valid_mask_batched
 from .slew import SlewSim
 from .spec import JobSpec
 
@@ -155,6 +155,8 @@ class CoDesignEnv:
             self.design_step[idx] += 1
             last = idx[self.design_step[idx] == self.D]
             if len(last):
+                if self.spec.design.repair:
+                    self.grids[last] = seed_component_batched(self.grids[last])
                 valid = valid_mask_batched(self.grids[last])
                 bad, good = last[~valid], last[valid]
                 reward[bad] = self.penalty

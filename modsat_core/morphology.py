@@ -164,6 +164,31 @@ def valid_mask_batched(grids: Tensor) -> Tensor:
     return any_filled & connected & has_act
 
 
+def seed_component_batched(grids: Tensor) -> Tensor:
+    """Repair B designs so each is valid: the centre (seed) cell becomes an actuator and
+    every module not face-connected to it is removed. (B, N, N, N) -> a new tensor."""
+    g = grids.clone()
+    B, N = g.shape[0], g.shape[1]
+    c = N // 2
+    g[:, c, c, c] = ACTUATOR
+    filled = g > 0
+    reached = torch.zeros_like(filled)
+    reached[:, c, c, c] = True
+    while True:
+        grown = reached.clone()
+        grown[:, 1:] |= reached[:, :-1]
+        grown[:, :-1] |= reached[:, 1:]
+        grown[:, :, 1:] |= reached[:, :, :-1]
+        grown[:, :, :-1] |= reached[:, :, 1:]
+        grown[:, :, :, 1:] |= reached[:, :, :, :-1]
+        grown[:, :, :, :-1] |= reached[:, :, :, 1:]
+        grown &= filled
+        if torch.equal(grown, reached):
+            break
+        reached = grown
+    return torch.where(reached, g, torch.zeros_like(g))
+
+
 def mass_properties_batched(
     grids: Tensor, module_mass_kg: float = 1.0, module_size_m: float = 0.1, dtype: torch.dtype = torch.float64
 ) -> tuple[Tensor, Tensor, Tensor]:

@@ -11,7 +11,7 @@ from torch import Tensor, nn
 
 from .codesign_env import seed_grid
 from .features import CellObs, PhysState, cell_observation
-from .morphology import ACTUATOR
+from .morphology import ACTUATOR, seed_component_batched
 from .slew import SlewSim
 from .spec import JobSpec
 from .td3 import CellActor
@@ -26,6 +26,8 @@ def design_with(actor: CellActor, spec: JobSpec) -> np.ndarray:
     for d in range(D):
         obs = cell_observation(grid, torch.tensor([d]), D, phys, spec.mission.rate_limit_rad_s)
         grid = actor(obs).argmax(dim=-1).reshape(1, N, N, N)
+    if spec.design.repair:
+        grid = seed_component_batched(grid)
     return grid[0].numpy().astype(np.int64)
 
 

@@ -53,7 +53,8 @@ PRESETS: dict[str, JobSpec] = {
     "quick": JobSpec.model_validate({
         "name": "quick",
         "algorithm": "td3-codesign",
-        "design": {"grid_size": 3},
+        # Repair: every grown design flies (docs/learning.md: invalid designs starved short runs).
+        "design": {"grid_size": 3, "repair": True},
         "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
         "mission": {"episode_steps": 120, "slew_min_deg": 30.0, "slew_max_deg": 90.0, "tolerance_deg": 1.0,
                     "reward": _NO_EARLY_EXIT},

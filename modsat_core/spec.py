@@ -55,6 +55,14 @@ class DesignSpace(_Section):
             "Required by `td3-control`, which trains a controller for this design only."
         ),
     )
+    repair: bool = Field(
+        False,
+        description=(
+            "Make every grown design valid: after the last design step the seed cell becomes an "
+            "actuator and modules not face-connected to it are removed. Off in the paper, which "
+            "penalises invalid designs (`invalid_penalty`) instead."
+        ),
+    )
     invalid_penalty: float = Field(
         -100.0,
         ge=-1e6,

@@ -6,7 +6,7 @@ import torch
 
 from modsat_core.morphology import (
     ACTUATOR, STRUCTURE, is_connected, is_valid, mass_properties, mass_properties_batched,
-    valid_mask_batched, validity_problem,
+    seed_component_batched, valid_mask_batched, validity_problem,
 )
 
 A, M = 0.1, 1.0
@@ -132,3 +132,23 @@ def test_batched_matches_single_design_functions():
             assert mass[i].item() == pytest.approx(mp.mass_kg)
             np.testing.assert_allclose(com[i].numpy(), mp.com_grid_m, atol=1e-15)
             np.testing.assert_allclose(inertia[i].numpy(), mp.inertia_B_kgm2, atol=1e-15)
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_repair_keeps_the_seed_component_and_makes_every_design_valid(n):
+    rng = np.random.default_rng(n)
+    grids = torch.tensor(rng.integers(0, 3, size=(300, n, n, n)))
+    grids[:20] = 0  # empty grids become the seed module alone
+    fixed = seed_component_batched(grids)
+    assert valid_mask_batched(fixed).all()
+    c = n // 2
+    assert (fixed[:, c, c, c] == ACTUATOR).all()
+    assert ((fixed == 0) | (fixed == grids) | (torch.arange(n**3).reshape(n, n, n) == (c * n + c) * n + c)).all()
+    assert (fixed[:20] > 0).sum().item() == 20
+    # Already valid with the seed in place: unchanged.
+    assert torch.equal(seed_component_batched(fixed), fixed)
+    # A module cut off from the seed is dropped, the rest kept.
+    g = torch.zeros(1, 3, 3, 3, dtype=torch.long)
+    g[0, 1, 1, 1], g[0, 1, 1, 2], g[0, 0, 0, 0] = ACTUATOR, STRUCTURE, ACTUATOR
+    out = seed_component_batched(g)[0]
+    assert out[1, 1, 2] == STRUCTURE and out[0, 0, 0] == 0

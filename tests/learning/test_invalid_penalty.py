@@ -55,3 +55,22 @@ def test_worst_valid_episodes_still_beat_an_invalid_one():
         assert all(e["valid"] for e in valid)
         assert min(e["return"] for e in valid) > pen
     assert np.isfinite(pen)
+
+
+def test_with_repair_every_grown_design_flies():
+    from modsat_core.morphology import is_valid
+    from modsat_core.policy import design_with
+    from modsat_core.td3 import CellActor
+    from modsat_core.features import N_FEATURES
+
+    spec = tiny_spec(design__repair=True)
+    env = CoDesignEnv(spec, 16, seed=0)
+    gen = torch.Generator().manual_seed(0)
+    finished = []
+    for _ in range(3 * (spec.design.design_steps + spec.mission.episode_steps)):
+        a = torch.rand((16, env.C, 3), generator=gen) * 2 - 1  # random designs: mostly invalid unrepaired
+        finished += env.step(a).finished
+    assert len(finished) >= 16
+    assert all(r["valid"] and r["return"] > env.penalty for r in finished)
+    torch.manual_seed(1)
+    assert is_valid(design_with(CellActor(N_FEATURES, [16, 16]), spec))
