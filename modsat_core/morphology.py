@@ -133,6 +133,22 @@ def mass_properties(design, module_mass_kg: float = 1.0, module_size_m: float = 
 # ----------------------------------------------------------------------------- batched
 
 
+def _flood_fill(reached: Tensor, filled: Tensor) -> Tensor:
+    """Grow ``reached`` (B, N, N, N) bool by 6-neighbour dilation inside ``filled`` until it stops."""
+    while True:
+        grown = reached.clone()
+        grown[:, 1:] |= reached[:, :-1]
+        grown[:, :-1] |= reached[:, 1:]
+        grown[:, :, 1:] |= reached[:, :, :-1]
+        grown[:, :, :-1] |= reached[:, :, 1:]
+        grown[:, :, :, 1:] |= reached[:, :, :, :-1]
+        grown[:, :, :, :-1] |= reached[:, :, :, 1:]
+        grown &= filled
+        if torch.equal(grown, reached):
+            return reached
+        reached = grown
+
+
 def valid_mask_batched(grids: Tensor) -> Tensor:
     """Validity of B designs at once: (B, N, N, N) integer -> (B,) bool.
 
@@ -147,18 +163,7 @@ def valid_mask_batched(grids: Tensor) -> Tensor:
     reached = torch.zeros_like(flat)
     reached[torch.arange(B, device=grids.device), first] = any_filled
     reached = reached.reshape(filled.shape)
-    while True:
-        grown = reached.clone()
-        grown[:, 1:] |= reached[:, :-1]
-        grown[:, :-1] |= reached[:, 1:]
-        grown[:, :, 1:] |= reached[:, :, :-1]
-        grown[:, :, :-1] |= reached[:, :, 1:]
-        grown[:, :, :, 1:] |= reached[:, :, :, :-1]
-        grown[:, :, :, :-1] |= reached[:, :, :, 1:]
-        grown &= filled
-        if torch.equal(grown, reached):
-            break
-        reached = grown
+    reached = _flood_fill(reached, filled)
     connected = (reached == filled).reshape(B, -1).all(dim=1)
     has_act = (grids == ACTUATOR).reshape(B, -1).any(dim=1)
     return any_filled & connected & has_act
@@ -168,24 +173,13 @@ def seed_component_batched(grids: Tensor) -> Tensor:
     """Repair B designs so each is valid: the centre (seed) cell becomes an actuator and
     every module not face-connected to it is removed. (B, N, N, N) -> a new tensor."""
     g = grids.clone()
-    B, N = g.shape[0], g.shape[1]
+    N = g.shape[1]
     c = N // 2
     g[:, c, c, c] = ACTUATOR
     filled = g > 0
     reached = torch.zeros_like(filled)
     reached[:, c, c, c] = True
-    while True:
-        grown = reached.clone()
-        grown[:, 1:] |= reached[:, :-1]
-        grown[:, :-1] |= reached[:, 1:]
-        grown[:, :, 1:] |= reached[:, :, :-1]
-        grown[:, :, :-1] |= reached[:, :, 1:]
-        grown[:, :, :, 1:] |= reached[:, :, :, :-1]
-        grown[:, :, :, :-1] |= reached[:, :, :, 1:]
-        grown &= filled
-        if torch.equal(grown, reached):
-            break
-        reached = grown
+    reached = _flood_fill(reached, filled)
     return torch.where(reached, g, torch.zeros_like(g))
 
 
