@@ -12,14 +12,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.worker.helpers import FAST_ENV, REPO, pg, spawn_worker, sqlite_url, wait_for  # noqa: F401
-
-
-@pytest.hookimpl(wrapper=True, tryfirst=True)
-def pytest_runtest_makereport(item, call):
-    rep = yield
-    setattr(item, f"rep_{rep.when}", rep)  # lets fixtures see whether the test failed
-    return rep
+from tests.worker.helpers import FAST_ENV, REPO, pg, process_factory, spawn_worker, sqlite_url, wait_for  # noqa: F401
 
 
 def free_port() -> int:
@@ -84,21 +77,13 @@ class ServerProc(HttpProc):
 
 @pytest.fixture
 def start_server(tmp_path, request):
-    """Factory: start API servers; all are stopped (and their logs shown on failure) at teardown."""
-    servers: list[ServerProc] = []
+    """Factory: start API servers, ``start(db_url, env=None)``; stopped (logs shown on failure) at teardown."""
 
-    def start(db_url: str, env: dict[str, str] | None = None) -> ServerProc:
-        s = ServerProc(db_url, tmp_path / f"server{len(servers)}.log", env)
-        servers.append(s)
-        return s
+    def make(i: int, db_url: str, env: dict[str, str] | None = None) -> ServerProc:
+        return ServerProc(db_url, tmp_path / f"server{i}.log", env)
 
-    yield start
-    for s in servers:
-        s.stop()
-    failed = getattr(request.node, "rep_call", None)
-    if failed is not None and failed.failed:
-        for s in servers:
-            print(f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}")
+    yield from process_factory(
+        request, make, lambda s: f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}")
 
 
 @pytest.fixture(scope="module")

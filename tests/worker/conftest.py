@@ -5,13 +5,6 @@ from worker.store import JobStore
 from .helpers import db_url, pg, spawn_worker, sqlite_url  # noqa: F401 - fixtures
 
 
-@pytest.hookimpl(wrapper=True, tryfirst=True)
-def pytest_runtest_makereport(item, call):
-    rep = yield
-    setattr(item, f"rep_{rep.when}", rep)  # lets fixtures see whether the test failed
-    return rep
-
-
 @pytest.fixture
 def store(db_url):  # noqa: F811 - db_url is the fixture imported above
     """A job store on the parametrised database (SQLite, PostgreSQL), disposed after the test."""

@@ -193,20 +193,30 @@ def sqlite_url(tmp_path) -> str:
     return f"sqlite:///{tmp_path / 'jobs.db'}"
 
 
+def process_factory(request, make: Callable[..., Any], describe: Callable[[Any], str]):
+    """Body of a factory fixture (``yield from``): ``make(i, ...)`` starts the i-th process; at
+    teardown every one is stopped and, if the test failed, ``describe(p)`` (its log) is printed."""
+    procs: list[Any] = []
+
+    def start(*args, **kwargs):
+        p = make(len(procs), *args, **kwargs)
+        procs.append(p)
+        return p
+
+    yield start
+    for p in procs:
+        p.stop()
+    failed = getattr(request.node, "rep_call", None)  # set by the hook in tests/conftest.py
+    if failed is not None and failed.failed:
+        for p in procs:
+            print(describe(p))
+
+
 @pytest.fixture
 def spawn_worker(tmp_path, request):
-    """Start real worker processes; all are stopped (and their logs shown on failure) at teardown."""
-    procs: list[WorkerProc] = []
+    """Start real worker processes: ``spawn(db_url, runner="simulated", env=None)``."""
 
-    def spawn(db_url: str, runner: str = "simulated", env: dict[str, str] | None = None) -> WorkerProc:
-        w = WorkerProc(db_url, runner, tmp_path / f"worker{len(procs)}.log", env)
-        procs.append(w)
-        return w
+    def make(i: int, db_url: str, runner: str = "simulated", env: dict[str, str] | None = None) -> WorkerProc:
+        return WorkerProc(db_url, runner, tmp_path / f"worker{i}.log", env)
 
-    yield spawn
-    for w in procs:
-        w.stop()
-    failed = getattr(request.node, "rep_call", None)
-    if failed is not None and failed.failed:
-        for w in procs:
-            print(f"----- log of worker {w.pid}\n{w.log()}")
+    yield from process_factory(request, make, lambda w: f"----- log of worker {w.pid}\n{w.log()}")
