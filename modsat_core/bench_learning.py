@@ -74,10 +74,13 @@ def _environment() -> dict:
             "machine": platform.machine(), "cuda": torch.cuda.is_available()}
 
 
+def _seeded(spec: JobSpec, seeds: list[int]) -> list[JobSpec]:
+    """``spec`` once per seed, each re-validated (all before any run starts: a bad seed fails at once)."""
+    return [parse_spec(spec.model_copy(update={"seed": seed}).model_dump_json()) for seed in seeds]
+
+
 def bench_learn(spec: JobSpec, seeds: list[int], out_dir: str | None = None, log=None) -> dict:
-    runs = []
-    for seed in seeds:
-        runs.append(run_one(parse_spec(spec.model_copy(update={"seed": seed}).model_dump_json()), out_dir, log))
+    runs = [run_one(s, out_dir, log) for s in _seeded(spec, seeds)]
     agg = {k: _stats([r["policy"][k] for r in runs]) for k in ("mean_return", "success_rate_at_0.25_deg",
                                                                  "success_rate_at_1_deg")}
     agg["wall_s"] = _stats([r["wall_s"] for r in runs])
@@ -99,10 +102,9 @@ def bench_rl_vs_ga(rl: JobSpec, seeds: list[int], population: int, steps_per_des
     ga = ga_spec_like(rl, population, steps_per_design)
     out = {"benchmark": "rl-vs-ga", "environment": _environment(), "env_step_budget": rl.training.total_env_steps,
            "rl_spec": rl.model_dump(mode="json"), "ga": ga.ga.model_dump(mode="json"), "runs": {"rl": [], "ga": []}}
-    for seed in seeds:
-        for key, spec in (("rl", rl), ("ga", ga)):
-            s = parse_spec(spec.model_copy(update={"seed": seed}).model_dump_json())
-            out["runs"][key].append(run_one(s, out_dir, log))
+    for rl_s, ga_s in zip(_seeded(rl, seeds), _seeded(ga, seeds)):
+        out["runs"]["rl"].append(run_one(rl_s, out_dir, log))
+        out["runs"]["ga"].append(run_one(ga_s, out_dir, log))
     for key in ("rl", "ga"):
         out[key] = {k: _stats([r["policy"][k] for r in out["runs"][key]])
                     for k in ("mean_return", "success_rate", "median_final_error_deg")}

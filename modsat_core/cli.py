@@ -23,7 +23,11 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def _cmd_bench_learning(args: argparse.Namespace) -> int:
     from .bench_learning import bench_learn, bench_rl_vs_ga
 
+    import os
+
     spec = _load_spec(args)
+    if args.out:  # before hours of training, not after
+        os.makedirs(args.out, exist_ok=True)
 
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
@@ -36,9 +40,6 @@ def _cmd_bench_learning(args: argparse.Namespace) -> int:
         report = bench_rl_vs_ga(spec, args.seeds, args.population, args.steps_per_design, args.out, log)
     text = json.dumps(report, indent=2)
     if args.out:
-        import os
-
-        os.makedirs(args.out, exist_ok=True)
         with open(os.path.join(args.out, f"bench-{args.what}.json"), "w") as fh:
             fh.write(text + "\n")
     print(text)
@@ -320,8 +321,8 @@ def main(argv: list[str] | None = None) -> int:
     except SpecError as exc:
         print(f"modsat: {exc}", file=sys.stderr)
         return 2
-    except (KeyError, FileNotFoundError, IsADirectoryError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) else f"{exc.strerror}: {exc.filename}"
+    except (KeyError, OSError) as exc:  # an unknown preset; a file or directory that cannot be used
+        msg = exc.args[0] if isinstance(exc, KeyError) else f"{exc.strerror or exc}: {exc.filename}"
         print(f"modsat: {msg}", file=sys.stderr)
         return 2
 
