@@ -451,6 +451,16 @@ async function renderFiles(job, files) {
     el("span", { class: "hint", text: ` ${fmt.bytes(f.size)} (${f.kind})` }))));
   if (!files.length) ul.append(el("li", { class: "hint", text: "no files yet" }));
 
+  // Before the awaits below, so the 3D buttons never show the previous job's (or a default) state.
+  const has3d = names.has("design.json") && names.has("trajectories.json");
+  const hasRec = names.has("evaluation.viser");
+  $("view-live").disabled = !has3d || !(state.viewer && state.viewer.enabled);
+  $("view-rec").disabled = !hasRec;
+  $("view-note").textContent = !has3d ? "The 3D view is there once the run has succeeded."
+    : !(state.viewer && state.viewer.enabled) ? "The live viewer is off on this server (--no-viewer); the recording still plays."
+    : "Live: pick slews, play them, see the time plots; compare with another run side by side. "
+      + "Recording: the stored replay of the evaluation slews (policy beside the PD baseline).";
+
   const evBox = $("evaluation");
   if (names.has("evaluation.json")) {
     const r = await api(`/api/jobs/${job.id}/artifacts/evaluation.json`);
@@ -466,14 +476,6 @@ async function renderFiles(job, files) {
   }
   drawCurves();
 
-  const has3d = names.has("design.json") && names.has("trajectories.json");
-  const hasRec = names.has("evaluation.viser");
-  $("view-live").disabled = !has3d || !(state.viewer && state.viewer.enabled);
-  $("view-rec").disabled = !hasRec;
-  $("view-note").textContent = !has3d ? "The 3D view is there once the run has succeeded."
-    : !(state.viewer && state.viewer.enabled) ? "The live viewer is off on this server (--no-viewer); the recording still plays."
-    : "Live: pick slews, play them, see the time plots; compare with another run side by side. "
-      + "Recording: the stored replay of the evaluation slews (policy beside the PD baseline).";
   return has3d;
 }
 
