@@ -140,8 +140,9 @@ async def job_events(
     state = await run_in_threadpool(store.job_state, job_id)
     if state is None:
         raise _unknown(job_id)
-    if last_event_id and last_event_id.strip().isdigit():
-        after = max(after, min(int(last_event_id.strip()), 2**31 - 1))
+    seen = (last_event_id or "").strip()
+    if seen.isascii() and seen.isdigit():  # ASCII only: int() refuses '²'; and no 5,000-digit int()
+        after = max(after, 2**31 - 1 if len(seen) > 10 else min(int(seen), 2**31 - 1))
 
     async def stream():
         last, shown = after, None

@@ -82,7 +82,7 @@ def spec_from_body(body: Any) -> JobSpec:
         body = merge(PRESETS[name].model_dump(mode="json"), overrides)
         prefix = ["overrides"]
     try:
-        return parse_spec(body)
+        spec = parse_spec(body)
     except SpecError as exc:
         locs = [list(e.get("loc", ())) for e in exc.errors] or [[] for _ in exc.messages]
         kinds = [str(e.get("type", "value_error")) for e in exc.errors] or ["value_error" for _ in exc.messages]
@@ -93,3 +93,7 @@ def spec_from_body(body: Any) -> JobSpec:
     except (ValueError, TypeError, RecursionError) as exc:  # a validator bug must not become a 500
         log.exception("spec validation raised unexpectedly")
         raise Invalid([_error([], f"body: the spec could not be validated: {exc}")]) from None
+    if spec.name is not None and "\x00" in spec.name:  # stored as a text column: PostgreSQL refuses NUL
+        raise Invalid([_error([*prefix, "name"], "name: must not contain the NUL character (\\u0000)",
+                              "string_pattern_mismatch")])
+    return spec

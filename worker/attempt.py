@@ -17,7 +17,8 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlchemyError
+from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 
 from modsat_core.spec import SpecError, parse_spec
 
@@ -33,6 +34,12 @@ class _Flags:
     lost: threading.Event = field(default_factory=threading.Event)
     cancel: threading.Event = field(default_factory=threading.Event)
     done: threading.Event = field(default_factory=threading.Event)
+
+
+def _transient(exc: SQLAlchemyError) -> bool:
+    """A database outage (worth retrying), not a statement the database will always refuse."""
+    return isinstance(exc, (OperationalError, InterfaceError, PoolTimeoutError)) or (
+        isinstance(exc, DBAPIError) and exc.connection_invalidated)
 
 
 def _exit_text(code: int | None) -> str:
@@ -184,7 +191,9 @@ class Attempt:
 
     def _finish(self, result: tuple | None, exitcode: int | None) -> str:
         """Record the attempt's end. The final write is retried through a database outage
-        (the heartbeat thread keeps the lease meanwhile): a finished training is not lost lightly."""
+        (the heartbeat thread keeps the lease meanwhile): a finished training is not lost lightly.
+        An error that a retry cannot cure (e.g. a value the database refuses) is raised: the
+        worker then records a failed attempt instead of retrying for ever."""
         delay = 0.5
         while True:
             try:
@@ -192,6 +201,8 @@ class Attempt:
             except SQLAlchemyError as exc:
                 if self.flags.lost.is_set():
                     return "lost"
+                if not _transient(exc):
+                    raise
                 log.error("job %s: could not record the end of attempt %s (retrying in %.0f s): %s",
                           self.claim.job_id, self.claim.attempt, delay, exc)
                 time.sleep(delay)

@@ -213,19 +213,19 @@ class JobStore:
             return None
         now = db_now()
         with self._write() as conn:
-            r = conn.execute(
-                update(jobs).where(jobs.c.id == job_id, jobs.c.status == "queued")
-                .values(status="cancelled", cancel_requested=True, finished_at=now, updated_at=now, phase=None)
-            )
-            if r.rowcount:
+            # The row is locked (PostgreSQL; SQLite: BEGIN IMMEDIATE) so that its status cannot
+            # change between reading it and acting on it (a release, a claim, a failure).
+            status = conn.execute(
+                select(jobs.c.status).where(jobs.c.id == job_id).with_for_update()
+            ).scalar_one_or_none()
+            if status == "queued":
+                conn.execute(update(jobs).where(jobs.c.id == job_id, jobs.c.status == "queued").values(
+                    status="cancelled", cancel_requested=True, finished_at=now, updated_at=now, phase=None))
                 return "stopped"
-            r = conn.execute(
-                update(jobs).where(jobs.c.id == job_id, jobs.c.status == "running")
-                .values(cancel_requested=True, updated_at=now)
-            )
-            if r.rowcount:
+            if status == "running":
+                conn.execute(update(jobs).where(jobs.c.id == job_id, jobs.c.status == "running")
+                             .values(cancel_requested=True, updated_at=now))
                 return "requested"
-            status = conn.execute(select(jobs.c.status).where(jobs.c.id == job_id)).scalar_one_or_none()
         return status
 
     # ------------------------------------------------------------------ artefacts (database store)
@@ -239,7 +239,7 @@ class JobStore:
         return [dict(r) for r in rows]
 
     def artifact_info(self, job_id: int, name: str) -> dict[str, Any] | None:
-        if not _valid_id(job_id):
+        if not _valid_id(job_id) or "\x00" in name:  # no stored name has a NUL (PostgreSQL rejects it)
             return None
         cols = [c for c in artifacts.c if c.name != "data"]
         with self._read() as conn:
@@ -431,8 +431,8 @@ class JobStore:
         A job whose cancel was requested meanwhile ends ``cancelled`` instead."""
         now = db_now()
         with self._write() as conn:
-            row = conn.execute(
-                select(jobs.c.cancel_requested).where(_fence(c))
+            row = conn.execute(  # locked: a cancel that comes meanwhile waits, then sees the new status
+                select(jobs.c.cancel_requested).where(_fence(c)).with_for_update()
             ).first()
             if row is None:
                 return False
@@ -461,9 +461,11 @@ class JobStore:
     def _fail(self, c: Claim, *, error: str, detail: str | None, outcome: str, retry_delay_s: float,
               attempt_seconds: float, retry: bool) -> str | None:
         now = db_now()
+        error, detail = _no_nul(error), _no_nul(detail)
         with self._write() as conn:
-            row = conn.execute(
+            row = conn.execute(  # locked, as in release()
                 select(jobs.c.failures, jobs.c.max_attempts, jobs.c.cancel_requested).where(_fence(c))
+                .with_for_update()
             ).first()
             if row is None:
                 return None
@@ -506,6 +508,11 @@ class JobStore:
     def _end_attempt(conn: Connection, c: Claim, outcome: str, now: Any, error: str | None = None) -> None:
         conn.execute(update(attempts).where(attempts.c.job_id == c.job_id, attempts.c.attempt == c.attempt)
                      .values(ended_at=now, outcome=outcome, error=error))
+
+
+def _no_nul(text: str | None) -> str | None:
+    """Error text from a training may hold NUL characters, which PostgreSQL text cannot store."""
+    return None if text is None else text.replace("\x00", "\\x00")
 
 
 def _after_failure(failures: int, max_attempts: int, cancel_requested: bool, retry: bool) -> str:

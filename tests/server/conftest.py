@@ -12,7 +12,16 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.worker.helpers import FAST_ENV, REPO, pg, process_factory, spawn_worker, sqlite_url, wait_for  # noqa: F401
+from tests.worker.helpers import (  # noqa: F401
+    FAST_ENV,
+    REPO,
+    fresh_db_url,
+    pg,
+    process_factory,
+    spawn_worker,
+    sqlite_url,
+    wait_for,
+)
 
 
 def free_port() -> int:
@@ -84,6 +93,12 @@ def start_server(tmp_path, request):
 
     yield from process_factory(
         request, make, lambda s: f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}")
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def any_db_url(request, tmp_path, pg):  # noqa: F811 - pg is the fixture imported above
+    """An empty job store, once on SQLite and once on PostgreSQL (skipped if unreachable)."""
+    return fresh_db_url(request.param, tmp_path, pg)
 
 
 @pytest.fixture(scope="module")

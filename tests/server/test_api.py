@@ -183,3 +183,28 @@ def test_writes_need_the_bearer_token_when_set(start_server, sqlite_url):
     assert s.client.post(f"/api/jobs/{job_id}/cancel", headers={"Authorization": "Bearer s3cret"}).status_code == 200
     assert s.client.get(f"/api/jobs/{job_id}").status_code == 200, "reads stay open"
     assert s.client.get("/api/jobs").status_code == 200
+
+
+@pytest.mark.parametrize("last_event_id", [b"9" * 5000, b"\xb2", b"12x"])
+def test_unusable_last_event_id_is_not_a_500(api, last_event_id):
+    """Last-Event-ID is a client's echo of an id; one that is not a small ASCII number
+    (5,000 digits are more than int() converts; '\\xb2' is '²', a digit to isdigit()) is ignored
+    or clamped, never a 500."""
+    job_id = api.client.post("/api/jobs", json=TINY).json()["id"]
+    api.client.post(f"/api/jobs/{job_id}/cancel")
+    with api.client.stream("GET", f"/api/jobs/{job_id}/events", headers=[(b"last-event-id", last_event_id)]) as r:
+        assert r.status_code == 200
+        text = r.read().decode()
+    assert "event: end" in text and '"status": "cancelled"' in text
+
+
+def test_nul_characters_are_4xx_on_both_databases(start_server, any_db_url):
+    """PostgreSQL text cannot hold NUL: a job name or an artefact name with one was a 500 there."""
+    s = start_server(any_db_url)
+    r = s.client.post("/api/jobs", json={"preset": "quick", "overrides": {"name": "a\u0000b"}})
+    assert r.status_code == 422, r.text
+    assert any(m.startswith("name:") and "NUL" in m for m in r.json()["messages"])
+    assert r.json()["detail"][0]["loc"] == ["body", "overrides", "name"]
+    job_id = s.client.post("/api/jobs", json=TINY).json()["id"]
+    r = s.client.get(f"/api/jobs/{job_id}/artifacts/a%00b")
+    assert r.status_code == 404 and "no artefact" in r.json()["detail"]

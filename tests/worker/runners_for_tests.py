@@ -20,3 +20,13 @@ def crash_once(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None
 
     return simulated(spec, on_progress=progress, on_checkpoint=on_checkpoint, should_stop=should_stop,
                      checkpoint=checkpoint)
+
+
+def long_file_name(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None):
+    """A finished run with a file name longer than the artefact table takes (200 characters):
+    PostgreSQL refuses to store it, whatever the number of retries."""
+    from worker.runners import noop
+
+    result = noop(spec, on_progress=on_progress, on_checkpoint=on_checkpoint, should_stop=should_stop)
+    result.files["x" * 300 + ".json"] = b"{}"
+    return result

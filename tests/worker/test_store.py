@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import contextmanager
 
 import pytest
+from sqlalchemy import event
 
 from worker.store import CHECKPOINT_NAME, JobStore
 
@@ -193,3 +195,76 @@ def test_list_filter_and_pagination(store):
     total, page = store.list_jobs(statuses=["queued"], limit=10, offset=2)
     assert total == 6 and len(page) == 4
     assert store.status_counts() == {"queued": 6, "cancelled": 1}
+
+
+@contextmanager
+def _after_first_statement(store, action):
+    """Run ``action`` (in another thread, on another connection) right after the first
+    statement of ``store``'s next transaction, while that transaction is still open. It gets
+    1 s; if it has to wait for a lock the transaction holds, it finishes after the commit."""
+    threads: list[threading.Thread] = []
+
+    def hook(_conn, _cursor, statement, *_args) -> None:
+        if threads or statement.lstrip().upper().startswith("BEGIN"):
+            return
+        t = threading.Thread(target=action)
+        threads.append(t)
+        t.start()
+        t.join(1.0)
+
+    event.listen(store.engine, "after_cursor_execute", hook)
+    try:
+        yield
+    finally:
+        event.remove(store.engine, "after_cursor_execute", hook)
+        for t in threads:
+            t.join(60)
+    assert threads, "the hook did not run"
+
+
+def test_cancel_during_release_is_not_lost(store, db_url):
+    """A cancel acknowledged while a shutting-down worker gives its job back ends the job,
+    rather than leaving it queued (to be run again) with the cancel flag set."""
+    job_id = submit(store)
+    c = store.claim("w", lease_s=30)
+    other, answers = JobStore(db_url), []
+    try:
+        with _after_first_statement(store, lambda: answers.append(other.request_cancel(job_id))):
+            assert store.release(c, attempt_seconds=0.0)
+    finally:
+        other.dispose()
+    assert answers in (["stopped"], ["requested"])
+    assert store.get_job(job_id)["status"] == "cancelled"
+
+
+def test_cancel_while_the_job_is_released_says_what_happened(store, db_url):
+    """The status a cancel acts on cannot change under it: a running job that its worker
+    gives back at that moment is reported as running (202), not as 'already cancelled'."""
+    job_id = submit(store)
+    c = store.claim("w", lease_s=30)
+    other, released = JobStore(db_url), []
+    try:
+        with _after_first_statement(store, lambda: released.append(other.release(c, attempt_seconds=0.0))):
+            answer = store.request_cancel(job_id)
+    finally:
+        other.dispose()
+    assert answer == "requested"
+    assert released == [True]
+    assert store.get_job(job_id)["status"] == "cancelled"
+
+
+def test_failure_text_with_nul_characters_is_stored(store):
+    """A training's error message may contain NUL, which PostgreSQL text refuses."""
+    job_id = submit(store, max_attempts=1)
+    c = store.claim("w", lease_s=30)
+    status = store.fail_attempt(c, error="training raised ValueError: a\x00b", detail="Traceback\x00...",
+                                outcome="failed", retry_delay_s=0, attempt_seconds=0.1)
+    assert status == "failed"
+    job = store.get_job(job_id)
+    assert "ValueError: a\\x00b" in job["error"] and job["error_detail"] == "Traceback\\x00..."
+    assert store.list_attempts(job_id)[0]["outcome"] == "failed"
+
+
+def test_artifact_name_with_nul_is_unknown(store):
+    job_id = submit(store)
+    assert store.artifact_info(job_id, "a\x00b") is None

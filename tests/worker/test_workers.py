@@ -182,3 +182,16 @@ def test_kill9_during_real_training_resumes_from_its_checkpoint(sqlite_url, spaw
     curve = json.loads(store.read_artifact(job_id, "curve.json"))
     assert curve["points"][-1]["env_steps"] >= 640
     store.dispose()
+
+
+def test_result_the_database_refuses_fails_the_attempt_instead_of_hanging(store, db_url, spawn_worker):
+    """Only a database outage is retried when the end of an attempt is recorded; a statement
+    the database will always refuse fails the attempt (before, the worker retried it for ever
+    and the job stayed `running` with a live lease)."""
+    job_id = submit(store, 160, max_attempts=2)
+    spawn_worker(db_url, "tests.worker.runners_for_tests:long_file_name")
+    wait_for(lambda: _status(store, job_id) in ("succeeded", "failed"), 60, "the job to end")
+    if store.backend == "postgresql":  # SQLite does not enforce the VARCHAR(200) of the name
+        job = store.get_job(job_id)
+        assert job["status"] == "failed" and "worker error: DataError" in job["error"], job["error"]
+        assert _outcomes(store, job_id) == [(1, "crashed"), (2, "crashed")]
