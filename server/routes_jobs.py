@@ -114,9 +114,10 @@ def get_metrics(
     state = store.job_state(job_id)
     if state is None:
         raise _unknown(job_id)
-    rows = store.metrics_after(job_id, after, limit)
+    rows = store.metrics_after(job_id, after, limit + 1)  # one more row tells whether more remain
+    more, rows = len(rows) > limit, rows[:limit]
     return MetricsPage(job_id=job_id, status=state[0], after=after, last_seq=rows[-1]["seq"] if rows else after,
-                       more=len(rows) == limit, items=[metrics_point(r) for r in rows])
+                       more=more, items=[metrics_point(r) for r in rows])
 
 
 def _sse(event: str, data: str, event_id: int | None = None) -> str:

@@ -208,3 +208,26 @@ def test_nul_characters_are_4xx_on_both_databases(start_server, any_db_url):
     job_id = s.client.post("/api/jobs", json=TINY).json()["id"]
     r = s.client.get(f"/api/jobs/{job_id}/artifacts/a%00b")
     assert r.status_code == 404 and "no artefact" in r.json()["detail"]
+
+
+def test_metrics_pages_say_more_only_when_rows_remain(start_server, sqlite_url):
+    """`more` was `len(page) == limit`: true when exactly `limit` rows remained, so a client
+    asked for an empty page. Three progress rows, read two at a time."""
+    from worker.store import JobStore
+
+    s = start_server(sqlite_url)
+    job_id = s.client.post("/api/jobs", json=TINY).json()["id"]
+    store = JobStore(sqlite_url)
+    try:
+        claim = store.claim("test-worker", lease_s=30)
+        assert claim.job_id == job_id
+        for step in (16, 32, 48):
+            store.publish_progress(claim, {"env_steps": step})
+    finally:
+        store.dispose()
+    first = s.client.get(f"/api/jobs/{job_id}/metrics", params={"limit": 2}).json()
+    assert [m["env_steps"] for m in first["items"]] == [16, 32] and first["more"] is True
+    second = s.client.get(f"/api/jobs/{job_id}/metrics", params={"after": first["last_seq"], "limit": 2}).json()
+    assert [m["env_steps"] for m in second["items"]] == [48] and second["more"] is False
+    exact = s.client.get(f"/api/jobs/{job_id}/metrics", params={"limit": 3}).json()
+    assert len(exact["items"]) == 3 and exact["more"] is False
