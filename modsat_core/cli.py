@@ -46,6 +46,31 @@ def _cmd_bench_learning(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_control(args: argparse.Namespace) -> int:
+    from .bench_control import bench_control
+
+    import os
+
+    from .spec import parse_spec
+
+    if args.eval_every < 1:
+        raise SystemExit("modsat bench control: --eval-every must be at least 1")
+    spec = _load_spec(args)
+    if args.hidden:  # validated as the spec's own field
+        training = spec.training.model_copy(update={"hidden_sizes": args.hidden})
+        spec = parse_spec(spec.model_copy(update={"training": training}).model_dump_json())
+    if args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    report = bench_control(spec, eval_every=args.eval_every,
+                           log=lambda line: print(line, file=sys.stderr, flush=True))
+    text = json.dumps(report, indent=2)
+    if args.out:
+        with open(args.out, "w") as fh:
+            fh.write(text + "\n")
+    print(text)
+    return 0
+
+
 def _cmd_presets(args: argparse.Namespace) -> int:
     from .presets import PRESETS, get_preset
 
@@ -265,6 +290,17 @@ def build_parser() -> argparse.ArgumentParser:
             bl.add_argument("--steps-per-design", type=int, default=10_000,
                             help="GA: TD3 env steps per evaluated design (default 10,000)")
         bl.set_defaults(func=_cmd_bench_learning, seed=None)
+
+    bc = bsub.add_parser("control", help="flat-MLP TD3 flying one fixed design on a spec's mission: "
+                         "is the mission learnable, at what cost")
+    bc.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
+    bc.add_argument("--preset", help="a named preset (see `modsat presets`)")
+    bc.add_argument("--steps", type=int, help="override training.total_env_steps")
+    bc.add_argument("--seed", type=int, help="override the seed")
+    bc.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes (default: training.hidden_sizes)")
+    bc.add_argument("--eval-every", type=int, default=5_000, help="env steps between evaluations (default 5,000)")
+    bc.add_argument("--out", help="also write the JSON report to this file")
+    bc.set_defaults(func=_cmd_bench_control, device=None)
 
     pr = sub.add_parser("presets", help="list the named presets, or print one as JSON")
     pr.add_argument("name", nargs="?")

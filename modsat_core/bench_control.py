@@ -1,0 +1,128 @@
+"""``modsat bench control``: is a spec's mission learnable by TD3 at all, and at what cost?
+
+A diagnostic beside the co-design runs. It trains a plain MLP actor-critic pair with the
+project's TD3 update (the one `td3_gym` checks on Pendulum-v1) to fly one fixed design --
+`design.fixed_design`, else the full cube with the centre actuator -- on the spec's
+mission, from the satellite's flat state: the same 17 numbers the co-design network's
+control part sees on an actuator cell (error quaternion, its rate, body rate, the fine
+error channel, the wheel momentum). No design phase, no per-cell network: one row per
+state instead of N^3, so an update costs a fraction of a co-design update and the width of
+the network can be varied cheaply.
+
+Uses the spec's mission, modules and training settings (envs, budget, network sizes,
+learning rates, batch, update ratio, noise). Every
+``eval_every`` env steps the deterministic actor flies the spec's final evaluation slews
+(`evaluation.episodes`, `evaluation.seed`), the same Monte-Carlo the co-design runs report.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from . import quaternion as quat
+from .envs import reference_design
+from .evaluate import monte_carlo
+from .features import FINE_GAIN
+from .mission import draw_episode
+from .pd import PDController
+from .slew import Design, SlewSim
+from .spec import JobSpec
+from .td3 import TD3, MLPActor, MLPCritic, ReplayBuffer, TD3Config
+
+
+def flat_state(sim: SlewSim) -> Tensor:
+    """(B, 14 + 3K) float32: what the co-design control features hold, for the whole satellite."""
+    rl = sim.mission.rate_limit_rad_s
+    q = sim.error_quaternion()
+    w = sim.state.omega_B
+    h = (sim.state.h_B / sim.h_scale_Nms).reshape(sim.B, -1)
+    return torch.cat((q, quat.derivative(q, w) * (2.0 / rl), w / rl, torch.tanh(FINE_GAIN * q[:, 1:]), h),
+                     dim=-1).float()
+
+
+class _Controller:
+    def __init__(self, actor: MLPActor, K: int):
+        self.actor, self.K = actor, K
+
+    def __call__(self, sim: SlewSim) -> Tensor:
+        return self.actor(flat_state(sim)).reshape(sim.B, self.K, 3).to(sim.dtype)
+
+
+def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
+                  log: Callable[[str], None] | None = None) -> dict:
+    """Train and evaluate; returns the curve and the cost (JSON-ready)."""
+    m, t = spec.mission, spec.training
+    grid = np.asarray(spec.design.fixed_design) if spec.design.fixed_design is not None else reference_design(
+        spec.design.grid_size)
+    design = Design.from_grid(grid, spec.modules)
+    K, B = design.n_actuators, t.num_envs
+    hidden = list(t.hidden_sizes)
+    torch.manual_seed(spec.seed)
+    gen = torch.Generator().manual_seed(spec.seed)
+    rngs = [np.random.default_rng([spec.seed, 1, i]) for i in range(B)]
+    sim = SlewSim.from_designs([design] * B, m, spec.modules, dtype=torch.float32)
+    sim.reset(list(range(B)), [draw_episode(r, m) for r in rngs])
+    obs_dim, act_dim = flat_state(sim).shape[1], 3 * K
+    agent = TD3(MLPActor(obs_dim, act_dim, hidden), MLPCritic(obs_dim, act_dim, hidden), TD3Config(
+        gamma=t.gamma, tau=t.tau, policy_noise=t.policy_noise, noise_clip=t.noise_clip, policy_delay=t.policy_delay,
+        actor_lr=t.actor_lr, critic_lr=t.critic_lr))
+    buf = ReplayBuffer({"o": ((obs_dim,), torch.float32), "a": ((act_dim,), torch.float32),
+                        "r": ((), torch.float32), "o2": ((obs_dim,), torch.float32), "d": ((), torch.bool)},
+                       capacity=min(t.buffer_size, max(t.total_env_steps, t.batch_size)))
+    curve: list[dict] = []
+    steps, credit, next_eval, t0 = 0, 0.0, eval_every, time.monotonic()
+
+    def evaluate() -> dict:
+        mc = monte_carlo(design, _Controller(agent.actor, K), m, spec.modules, episodes=spec.evaluation.episodes,
+                         seed=spec.evaluation.seed, dtype=torch.float64)
+        s = mc.summary((0.25, 1.0))
+        point = {"env_steps": steps, "updates": agent.updates, "wall_s": round(time.monotonic() - t0, 1),
+                 **{k: s[k] for k in ("mean_return", "success_rate", "success_rate_at_0.25_deg",
+                                      "success_rate_at_1_deg", "safety_violations", "median_final_error_deg",
+                                      "median_slew_time_ratio")}}
+        curve.append(point)
+        if log is not None:
+            log(f"  {steps:,} steps, {agent.updates:,} updates, {point['wall_s']:,.0f} s: return "
+                f"{point['mean_return']:.1f}, success {100 * point['success_rate']:.0f} %, median error "
+                f"{point['median_final_error_deg']:.2f} deg")
+        return point
+
+    while steps + B <= t.total_env_steps:
+        o = flat_state(sim)
+        if steps < t.learning_starts:
+            a = torch.rand((B, act_dim), generator=gen) * 2.0 - 1.0
+        else:
+            with torch.no_grad():
+                a = agent.actor(o)
+            a = (a + torch.randn(a.shape, generator=gen) * t.exploration_noise).clamp(-1.0, 1.0)
+        out = sim.step(a.reshape(B, K, 3))
+        buf.add({"o": o, "a": a, "r": out.reward.float(), "o2": flat_state(sim), "d": out.terminated})
+        ended = (out.terminated | out.truncated).nonzero().flatten().tolist()
+        if ended:
+            sim.reset(ended, [draw_episode(rngs[i], m) for i in ended])
+        steps += B
+        if steps >= t.learning_starts and buf.size >= t.batch_size:
+            credit += B / t.train_frequency
+            while credit >= 1.0:
+                credit -= 1.0
+                b = buf.sample(t.batch_size, gen)
+                agent.update(b["o"], b["a"], b["r"], b["o2"], b["d"], gen)
+        if steps >= next_eval:
+            evaluate()
+            next_eval += eval_every
+    if not curve or curve[-1]["env_steps"] != steps:
+        evaluate()
+    pd = monte_carlo(design, PDController, m, spec.modules, episodes=spec.evaluation.episodes, seed=spec.evaluation.seed)
+    best = max(curve, key=lambda p: p["mean_return"])
+    return {"benchmark": "control", "design": grid.tolist(), "hidden_sizes": hidden, "seed": spec.seed,
+            "wall_s": round(time.monotonic() - t0, 1), "env_steps": steps, "updates": agent.updates,
+            "threads": torch.get_num_threads(), "curve": curve, "best": best,
+            "pd_baseline": {k: v for k, v in pd.summary((0.25, 1.0)).items()
+                            if k in ("mean_return", "success_rate", "success_rate_at_0.25_deg",
+                                     "success_rate_at_1_deg", "median_slew_time_ratio")}}
+
