@@ -83,7 +83,8 @@ def reward(
     """Per-step reward (Elkins et al. 2020) and safety violation.
 
     ``exp(-phi / scale)``, minus ``no_progress_penalty`` when phi did not decrease, plus
-    ``in_tolerance_bonus`` while phi <= tolerance; a rate above the limit ends the episode
+    ``in_tolerance_bonus`` while phi <= tolerance (and, with ``bonus_needs_settled``, the rate
+    <= ``rate_tolerance_rad_s``); a rate above the limit ends the episode
     with ``-safety_penalty`` (minus ``safety_penalty_per_remaining_step`` for each of the
     ``steps_left`` control steps it had left). Returns (reward, in_tolerance, violated), each (B,).
     """
@@ -92,7 +93,8 @@ def reward(
     in_tol = phi_rad <= tol
     rew = torch.exp(-phi_rad / r.error_scale_rad)
     rew = rew - r.no_progress_penalty * (phi_rad >= phi_prev_rad).to(rew.dtype)
-    rew = rew + r.in_tolerance_bonus * in_tol.to(rew.dtype)
+    bonus = in_tol & (omega_norm <= mission.rate_tolerance_rad_s) if r.bonus_needs_settled else in_tol
+    rew = rew + r.in_tolerance_bonus * bonus.to(rew.dtype)
     violated = omega_norm > mission.rate_limit_rad_s
     penalty = torch.full_like(rew, -r.safety_penalty)
     if steps_left is not None and r.safety_penalty_per_remaining_step:

@@ -131,6 +131,15 @@ class RewardSpec(_Section):
         1.0, ge=0.0, le=100.0, description="Subtracted when the error angle did not decrease."
     )
     in_tolerance_bonus: float = Field(9.0, ge=0.0, le=1000.0, description="Added while phi <= tolerance.")
+    bonus_needs_settled: bool = Field(
+        False,
+        description=(
+            "Pay `in_tolerance_bonus` only while the body rate is also at most "
+            "`mission.rate_tolerance_rad_s`, the success condition, rather than whenever phi is "
+            "within tolerance (the paper's reward, which pays a controller that chatters through "
+            "the tolerance cone as much as one that holds still in it)."
+        ),
+    )
     safety_penalty: float = Field(
         50.0, ge=0.0, le=1e4, description="Subtracted once when the rate limit is exceeded (episode ends)."
     )

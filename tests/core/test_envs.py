@@ -82,6 +82,19 @@ def test_hold_at_target_earns_the_tolerance_bonus_and_a_spin_ends_with_the_safet
     assert info["episode"]["safety_violation"] and not info["episode"]["success"]
 
 
+def test_settled_bonus_is_paid_only_below_the_rate_tolerance():
+    """`bonus_needs_settled`: passing through the tolerance cone earns no bonus; holding still does."""
+    spec = {**SHORT, "mission": {**SHORT["mission"], "reward": {"bonus_needs_settled": True}}}
+    env = SatelliteSlewEnv(spec=spec)
+    env.reset(seed=0, options={"q_TN": [1.0, 0, 0, 0]})
+    _, r, *_ = env.step(np.zeros((1, 3), dtype=np.float32))
+    assert r == pytest.approx(1.0 - 1.0 + 9.0)  # at rest on target: settled
+    env.reset(seed=0, options={"q_TN": [1.0, 0, 0, 0], "omega_B": [0.02, 0.0, 0.0]})
+    _, r, *_, info = env.step(np.zeros((1, 3), dtype=np.float32))
+    assert info["error_deg"] < 1.0 and r == pytest.approx(np.exp(-np.radians(info["error_deg"]) / (0.28 * np.pi)) - 1.0,
+                                                          rel=1e-4)
+
+
 def test_invalid_design_is_refused():
     with pytest.raises(ValueError, match="no actuator"):
         SatelliteSlewEnv(design=np.ones((3, 3, 3), dtype=int))
