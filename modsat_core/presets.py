@@ -69,7 +69,7 @@ PRESETS: dict[str, JobSpec] = {
     "cpu-3x3x3": JobSpec.model_validate({
         "name": "cpu-3x3x3",
         "algorithm": "td3-codesign",
-        "design": {"grid_size": 3},
+        "design": {"grid_size": 3, "repair": True},
         "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
         "mission": {"reward": _NO_EARLY_EXIT},
         "training": {
