@@ -28,47 +28,45 @@ def _cmd_bench_learning(args: argparse.Namespace) -> int:
     spec = _load_spec(args)
     if args.out:  # before hours of training, not after
         os.makedirs(args.out, exist_ok=True)
-
-    def log(line: str) -> None:
-        print(line, file=sys.stderr, flush=True)
-
     if args.what == "learn":
-        report = bench_learn(spec, args.seeds, args.out, log)
+        report = bench_learn(spec, args.seeds, args.out, _log)
     else:
         if spec.algorithm != "td3-codesign":
             raise SystemExit("modsat bench rl-vs-ga: give a td3-codesign spec; its GA twin is derived from it")
-        report = bench_rl_vs_ga(spec, args.seeds, args.population, args.steps_per_design, args.out, log)
-    text = json.dumps(report, indent=2)
-    if args.out:
-        with open(os.path.join(args.out, f"bench-{args.what}.json"), "w") as fh:
-            fh.write(text + "\n")
-    print(text)
+        report = bench_rl_vs_ga(spec, args.seeds, args.population, args.steps_per_design, args.out, _log)
+    _print_report(report, os.path.join(args.out, f"bench-{args.what}.json") if args.out else None)
     return 0
 
 
 def _cmd_bench_control(args: argparse.Namespace) -> int:
     from .bench_control import bench_control
 
+    import errno
     import os
-
-    from .spec import parse_spec
 
     if args.eval_every < 1:
         raise SystemExit("modsat bench control: --eval-every must be at least 1")
     spec = _load_spec(args)
-    if args.hidden:  # validated as the spec's own field
-        training = spec.training.model_copy(update={"hidden_sizes": args.hidden})
-        spec = parse_spec(spec.model_copy(update={"training": training}).model_dump_json())
-    if args.out:
+    if args.out:  # before the training, not after
+        if os.path.isdir(args.out):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
         os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    report = bench_control(spec, eval_every=args.eval_every,
-                           log=lambda line: print(line, file=sys.stderr, flush=True))
+    report = bench_control(spec, eval_every=args.eval_every, log=_log)
+    _print_report(report, args.out)
+    return 0
+
+
+def _log(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _print_report(report: dict, path: str | None) -> None:
+    """A benchmark's JSON report on stdout and, if ``path``, in that file."""
     text = json.dumps(report, indent=2)
-    if args.out:
-        with open(args.out, "w") as fh:
+    if path:
+        with open(path, "w") as fh:
             fh.write(text + "\n")
     print(text)
-    return 0
 
 
 def _cmd_presets(args: argparse.Namespace) -> int:
@@ -123,6 +121,8 @@ def _load_spec(args: argparse.Namespace):
         updates["total_env_steps"] = args.steps
     if args.device is not None:
         updates["device"] = args.device
+    if getattr(args, "hidden", None):
+        updates["hidden_sizes"] = args.hidden
     if updates:
         spec = spec.model_copy(update={"training": spec.training.model_copy(update=updates)})
     if args.seed is not None:

@@ -51,3 +51,7 @@ def test_cli_bench_control_rejects_bad_sizes(tiny, tmp_path, capsys):
     spec_path.write_text(tiny().model_dump_json())
     assert main(["bench", "control", str(spec_path), "--hidden", "1"]) == 2
     assert "hidden_sizes" in capsys.readouterr().err
+    # --out names the report file: a directory there fails before any training, not after it
+    assert main(["bench", "control", str(spec_path), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "Is a directory" in err and str(tmp_path) in err
