@@ -24,7 +24,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
+from .spec import ACTUATOR, EMPTY, STRUCTURE  # noqa: F401 - the cell types, re-exported here
+
 _NEIGHBOURS = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
 
 

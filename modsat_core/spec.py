@@ -17,6 +17,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 SPEC_VERSION = 1
 
+#: Cell types of a design grid (here, free of torch, so the API and the viewer can share them).
+EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
+
 # Numbers that appear in several places of the spec.
 PAPER_TAU_3X3X3_NM = 0.8
 PAPER_TAU_5X5X5_NM = 1.5

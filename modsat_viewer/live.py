@@ -22,8 +22,8 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from .run import CONTROLLERS, Episode, RunData
-from .scene import camera_position, draw_satellite, side_by_side_positions
+from .run import CONTROLLERS, Episode, RunData, sample_period
+from .scene import draw_satellite, lay_out
 
 log = logging.getLogger("modsat.viewer")
 
@@ -41,8 +41,8 @@ class RunSource(Protocol):
     def load(self, key: str) -> RunData:
         """The run ``key``; raises KeyError if there is no such run."""
 
-    def defaults(self) -> tuple[str | None, str | None]:
-        """The runs a new tab shows when it asks for none: (main, compare or None)."""
+    def defaults(self, choices: list[tuple[str, str]]) -> tuple[str | None, str | None]:
+        """The runs a new tab shows when it asks for none, given ``choices()``: (main, compare or None)."""
 
 
 class DirRuns:
@@ -64,8 +64,8 @@ class DirRuns:
             raise KeyError(key)
         return self._runs[i]
 
-    def defaults(self) -> tuple[str | None, str | None]:
-        return ("1" if self._runs else None, "2" if len(self._runs) > 1 else None)
+    def defaults(self, choices: list[tuple[str, str]]) -> tuple[str | None, str | None]:
+        return (choices[0][0] if choices else None, choices[1][0] if len(choices) > 1 else None)
 
 
 def _series(ep: Episode | None, times: np.ndarray, what: str) -> np.ndarray:
@@ -73,8 +73,7 @@ def _series(ep: Episode | None, times: np.ndarray, what: str) -> np.ndarray:
     if ep is None or not len(ep.t_s):
         return np.full(len(times), np.nan)
     v = {"error": ep.error_deg, "rate": ep.rate_rad_s, "momentum": ep.wheel_momentum_Nms}[what]
-    idx = np.clip(np.searchsorted(ep.t_s, times + ep.t_s[0] + 1e-9, side="right") - 1, 0, len(ep.t_s) - 1)
-    return v[idx].astype(np.float64)
+    return v[ep.indices_at(times + ep.t_s[0])].astype(np.float64)
 
 
 PLOTS = (("error", "error angle (deg)"), ("rate", "body rate |omega| (rad/s)"),
@@ -143,11 +142,12 @@ class Session:
 
     # ------------------------------------------------------------------ selection
     def _start(self, query: dict[str, str]) -> None:
-        main, cmp_ = self.app.source.defaults()
+        choices = self.app.source.choices()  # read once: under `modsat serve` it queries the job store
+        main, cmp_ = self.app.source.defaults(choices)
         main = query.get("run", main)
         cmp_ = query.get("compare", cmp_ if "run" not in query else None)
         with self.lock:
-            self._set_choices(main, cmp_)
+            self._set_choices(main, cmp_, choices)
             ctrl = query.get("controller")
             if ctrl in CONTROLLERS:
                 self.ctrl_dd.value = CONTROLLERS[ctrl]
@@ -164,8 +164,8 @@ class Session:
             self.playing = query.get("play") == "1"
             self.play_btn.label = "Pause" if self.playing else "Play"
 
-    def _set_choices(self, main: str | None, cmp_: str | None) -> None:
-        self.keys = dict(self.app.source.choices())  # key -> label, newest first
+    def _set_choices(self, main: str | None, cmp_: str | None, choices: list[tuple[str, str]]) -> None:
+        self.keys = dict(choices)  # key -> label, newest first
         for k in (main, cmp_):  # asked for by key but not in the list (e.g. an old job): add it
             if k is not None and k not in self.keys:
                 try:
@@ -183,7 +183,7 @@ class Session:
 
     def _refresh_choices(self) -> None:
         main, cmp_ = self.key_of.get(self.run_dd.value), self.key_of.get(self.cmp_dd.value)
-        self._set_choices(main, cmp_)
+        self._set_choices(main, cmp_, self.app.source.choices())
 
     def _runs_changed(self) -> None:
         keys = [self.key_of.get(self.run_dd.value)]
@@ -237,14 +237,7 @@ class Session:
                 scene.remove_by_name("/B")
             if not self.runs:
                 scene.remove_by_name("/A")
-            places = side_by_side_positions([s.radius for s in self.sats])
-            for name, pos in zip("AB", places):
-                scene.add_frame(f"/{name}", show_axes=False, position=pos)
-            extent = max([abs(p[1]) for p in places] + [0.0]) + max([s.radius for s in self.sats] + [1.5])
-            floor_z = -max([s.radius for s in self.sats] + [1.5]) - 0.5
-            scene.add_grid("/floor", width=2 * extent + 4, height=2 * extent + 4, cell_size=1.0, section_size=5.0,
-                           position=(0.0, 0.0, floor_z))
-            self.client.camera.position = camera_position(extent)
+            self.client.camera.position = lay_out(scene, ["/A", "/B"][:len(self.sats)], self.sats, min_radius=1.5)
             self.client.camera.look_at = (0.0, 0.0, 0.0)
         self.title.content = self._title()
         self.info.content = self._info()
@@ -275,8 +268,7 @@ class Session:
         eps = self._episodes()
         live = [e for e in eps if e is not None and len(e.t_s)]
         self.duration = max([e.duration_s for e in live] + [0.0])
-        dts = [float(np.median(np.diff(e.t_s))) for e in live if len(e.t_s) > 1]
-        dt = min(dts) if dts else 0.1
+        dt = sample_period(live)
         with self.client.atomic():
             for sat, e in zip(self.sats, eps):
                 if e is not None and len(e.t_s):

@@ -18,8 +18,8 @@ from collections.abc import MutableMapping
 
 import numpy as np
 
-from .run import CONTROLLERS, RunData
-from .scene import camera_position, draw_satellite, side_by_side_positions
+from .run import CONTROLLERS, RunData, sample_period
+from .scene import draw_satellite, lay_out
 
 log = logging.getLogger("modsat.viewer")
 
@@ -34,8 +34,7 @@ _lock = threading.Lock()
 
 def _frames(episodes: list, max_fps: float) -> tuple[np.ndarray, float]:
     """Frame times of a set of episodes played together: (F,) s, and the frame period."""
-    dts = [float(np.median(np.diff(e.t_s))) for e in episodes if len(e.t_s) > 1]
-    dt = min(dts) if dts else 0.1
+    dt = sample_period(episodes)
     stride = max(1, int(round((1.0 / max_fps) / dt))) if dt > 0 else 1
     period = dt * stride
     end = max((e.t_s[-1] for e in episodes if len(e.t_s)), default=0.0)
@@ -69,13 +68,7 @@ def recording_bytes(design_json, trajectories_json, *, spec_json=None, title: st
             sats = []
             for c in shown:
                 sats.append(draw_satellite(scene, f"/{c}", run.grid, label=f"{run.title}: {CONTROLLERS[c]}"))
-            places = side_by_side_positions([s.radius for s in sats])
-            for c, pos in zip(shown, places):
-                scene.add_frame(f"/{c}", show_axes=False, position=pos)
-            extent = max(abs(p[1]) for p in places) + max(s.radius for s in sats)
-            scene.add_grid("/floor", width=2 * extent + 4, height=2 * extent + 4, cell_size=1.0, section_size=5.0,
-                           position=(0.0, 0.0, -max(s.radius for s in sats) - 0.5))
-            server.initial_camera.position = camera_position(extent)
+            server.initial_camera.position = lay_out(scene, [f"/{c}" for c in shown], sats)
             server.initial_camera.look_at = (0.0, 0.0, 0.0)
             rec = server.get_scene_serializer()
             for i in range(n_ep):

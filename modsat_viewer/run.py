@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from modsat_core.spec import ACTUATOR, EMPTY
+
 #: Controllers in ``trajectories.json`` and how the viewer names them.
 CONTROLLERS = {"policy": "policy", "pd_baseline": "PD baseline"}
 
@@ -69,12 +71,14 @@ class Episode:
         """|h_B|, (T,) N m s."""
         return np.linalg.norm(self.h_B, axis=1)
 
+    def indices_at(self, t_s: np.ndarray) -> np.ndarray:
+        """For each time, the last sample at or before it (the first / last one outside the episode)."""
+        i = np.searchsorted(self.t_s, np.asarray(t_s) + 1e-9, side="right") - 1
+        return np.clip(i, 0, max(len(self.t_s) - 1, 0))
+
     def index_at(self, t_s: float) -> int:
-        """The last sample at or before ``t_s`` (the first / last one outside the episode)."""
-        if not len(self.t_s):
-            return 0
-        i = int(np.searchsorted(self.t_s, t_s + 1e-9, side="right")) - 1
-        return min(max(i, 0), len(self.t_s) - 1)
+        """:meth:`indices_at` of one time."""
+        return int(self.indices_at(np.array([t_s]))[0])
 
     def describe(self) -> str:
         """One line for a picker: slew angle and outcome."""
@@ -89,6 +93,12 @@ class Episode:
         if isinstance(err, (int, float)) and math.isfinite(err):
             parts.append(f"final error {err:.2f} deg")
         return ", ".join(parts)
+
+
+def sample_period(episodes: list[Episode]) -> float:
+    """The shortest median sample period of the episodes, s (0.1 when none has two samples)."""
+    dts = [float(np.median(np.diff(e.t_s))) for e in episodes if len(e.t_s) > 1]
+    return min(dts) if dts else 0.1
 
 
 @dataclass
@@ -147,8 +157,8 @@ class RunData:
 
     @property
     def modules(self) -> int:
-        return int((self.grid > 0).sum())
+        return int((self.grid != EMPTY).sum())
 
     @property
     def actuators(self) -> int:
-        return int((self.grid == 2).sum())
+        return int((self.grid == ACTUATOR).sum())

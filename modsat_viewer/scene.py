@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
+from modsat_core.spec import EMPTY
 
 #: sRGB colours (0-255). The actuator colour is what the browser tests look for.
 STRUCTURE_SRGB = (150, 150, 150)
@@ -149,6 +149,21 @@ def side_by_side_positions(radii: list[float]) -> list[tuple[float, float, float
         out.append((0.0, y + w / 2, 0.0))
         y += w + gap
     return out
+
+
+def lay_out(scene, prefixes: list[str], sats: list[SatelliteHandles], *, min_radius: float = 0.0
+            ) -> tuple[float, float, float]:
+    """Place the satellites drawn under ``prefixes`` side by side over a floor grid; returns a
+    camera position that frames them. ``min_radius`` sizes the floor for tiny (or no) satellites."""
+    radii = [s.radius for s in sats]
+    places = side_by_side_positions(radii)
+    for prefix, pos in zip(prefixes, places):
+        scene.add_frame(prefix, show_axes=False, position=pos)
+    biggest = max(radii + [min_radius])
+    extent = max([abs(p[1]) for p in places] + [0.0]) + biggest
+    scene.add_grid("/floor", width=2 * extent + 4, height=2 * extent + 4, cell_size=1.0, section_size=5.0,
+                   position=(0.0, 0.0, -biggest - 0.5))
+    return camera_position(extent)
 
 
 def camera_position(extent: float) -> tuple[float, float, float]:

@@ -38,7 +38,7 @@ class StoreRuns:
 
     def _rows(self) -> list[dict]:
         _, rows = self.store.list_jobs(statuses=["succeeded"], limit=self.limit, offset=0)
-        return [r for r in rows if all(self.store.artifact_info(r["id"], n) is not None for n in NEEDED)]
+        return [r for r in rows if set(NEEDED) <= {a["name"] for a in self.store.list_artifacts(r["id"])}]
 
     def choices(self) -> list[tuple[str, str]]:
         out = []
@@ -61,9 +61,8 @@ class StoreRuns:
         return RunData.from_json(files["design.json"], files["trajectories.json"], evaluation=files["evaluation.json"],
                                  spec=files["spec.json"], title=f"job {job_id} {row['name'] or ''}".strip())
 
-    def defaults(self) -> tuple[str | None, str | None]:
-        rows = self._rows()
-        return (str(rows[0]["id"]) if rows else None, None)
+    def defaults(self, choices: list[tuple[str, str]]) -> tuple[str | None, str | None]:
+        return (choices[0][0] if choices else None, None)
 
 
 def start_viewer(settings: ServerSettings, store):
