@@ -92,6 +92,34 @@ class WorkerProc:
         if self.proc.poll() is None:
             os.kill(self.pid, sig)
 
+    def pause_outside_a_write(self, db_url: str, job_id: int, tries: int = 100) -> None:
+        """SIGSTOP the worker at a moment when it holds no write lock on ``job_id``.
+
+        A process frozen inside a write transaction holds the database's one write lock
+        (SQLite) or the job's row (PostgreSQL) until it resumes: every other writer waits, or
+        skips the row. That is the database's behaviour, not the lease fencing a pause test is
+        about, so a pause that lands inside a transaction is undone and tried again."""
+        from sqlalchemy import select
+        from sqlalchemy.exc import OperationalError
+
+        from worker.db import jobs
+        from worker.store import JobStore
+
+        probe = JobStore(db_url, busy_timeout_s=0.2)
+        try:
+            for _ in range(tries):
+                self.signal(signal.SIGSTOP)
+                try:  # SQLite: BEGIN IMMEDIATE; PostgreSQL: the job's row, without waiting
+                    with probe._write_engine.begin() as conn:  # noqa: SLF001 - the store's write path
+                        conn.execute(select(jobs.c.id).where(jobs.c.id == job_id).with_for_update(nowait=True))
+                    return
+                except OperationalError:
+                    self.signal(signal.SIGCONT)
+                    time.sleep(0.05)
+        finally:
+            probe.dispose()
+        raise AssertionError(f"worker {self.pid} held a write lock at each of {tries} pauses")
+
     def stop(self, timeout: float = 15.0) -> int | None:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)

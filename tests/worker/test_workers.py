@@ -88,7 +88,7 @@ def test_paused_worker_that_lost_its_lease_publishes_nothing(store, db_url, spaw
     job_id = submit(store, 4000, checkpoint_every=400)
     a = spawn_worker(db_url, "simulated")
     wait_for(lambda: store.get_job(job_id)["checkpoint_env_steps"], 30, "a first checkpoint")
-    a.signal(signal.SIGSTOP)
+    a.pause_outside_a_write(db_url, job_id)
     try:
         spawn_worker(db_url, "simulated")
         wait_for(lambda: store.get_job(job_id)["attempt"] == 2, 30, "worker B to take the job over")
