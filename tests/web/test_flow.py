@@ -96,6 +96,9 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     page.wait_for_selector("#downloads a[href$='evaluation.viser']")
     page.wait_for_function("Number(document.querySelector('#curves').dataset.points) >= 1")
     assert page.locator("#curves svg.chart path").count() == 2, "return and success-rate curves are drawn"
+    # The table comes from its own fetch, after the file list: the curves (drawn live from the
+    # progress events already) say nothing about it.
+    page.wait_for_selector("#evaluation table.eval")
     table = page.text_content("#evaluation")
     assert "PD baseline" in table and "success rate" in table and "mean return" in table
     names = page.locator("#downloads a").all_text_contents()
