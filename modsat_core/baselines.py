@@ -11,21 +11,19 @@ import numpy as np
 import torch
 
 from .codesign_env import effective_invalid_penalty
-from .features import N_FEATURES
 from .ga import random_design
 from .morphology import ACTUATOR, EMPTY, is_valid
 from .policy import design_with
 from .spec import JobSpec
-from .td3 import CellActor
-from .train import REPORT_TOLERANCES_DEG, evaluate_design
+from .train import REPORT_TOLERANCES_DEG, evaluate_design, new_actor
 
 MAX_DRAWS = 10_000
 
 
-def untrained_actor(spec: JobSpec) -> CellActor:
+def untrained_actor(spec: JobSpec) -> torch.nn.Module:
     """The actor a run of ``spec`` starts from (same seed, same initialisation)."""
     torch.manual_seed(spec.seed)
-    actor = CellActor(N_FEATURES, list(spec.training.hidden_sizes))
+    actor = new_actor(spec)
     actor.eval()
     return actor
 
@@ -44,7 +42,7 @@ def random_valid_designs(rng: np.random.Generator, N: int, count: int) -> list[n
     raise RuntimeError(f"only {len(out)} distinct valid {N}^3 designs in {MAX_DRAWS} draws")
 
 
-def _flown(actor: CellActor, grid: np.ndarray, spec: JobSpec, episodes: int) -> dict:
+def _flown(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: int) -> dict:
     tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
     row = {"modules": int((grid != EMPTY).sum()), "actuators": int((grid == ACTUATOR).sum()),
            "valid": bool(is_valid(grid))}

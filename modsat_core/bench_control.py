@@ -3,7 +3,7 @@
 A diagnostic beside the co-design runs. It trains a plain MLP actor-critic pair with the
 project's TD3 update (the one `td3_gym` checks on Pendulum-v1) to fly one fixed design --
 `design.fixed_design`, else the full cube with the centre actuator -- on the spec's
-mission, from the satellite's flat state: the same 17 numbers the co-design network's
+mission, from the satellite's flat state: the same 23 numbers the co-design network's
 control part sees on an actuator cell (error quaternion, its rate, body rate, the fine
 error channel, the wheel momentum). No design phase, no per-cell network: one row per
 state instead of N^3, so an update costs a fraction of a co-design update and the width of
@@ -24,25 +24,22 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from . import quaternion as quat
 from .envs import reference_design
 from .evaluate import monte_carlo
-from .features import FINE_GAIN
+from .features import control_globals
 from .mission import draw_episode
+from .networks import MLPActor, MLPCritic
 from .pd import PDController
 from .slew import Design, SlewSim
 from .spec import JobSpec
-from .td3 import TD3, MLPActor, MLPCritic, ReplayBuffer, TD3Config
+from .td3 import TD3, ReplayBuffer, TD3Config
 
 
 def flat_state(sim: SlewSim) -> Tensor:
-    """(B, 14 + 3K) float32: what the co-design control features hold, for the whole satellite."""
-    rl = sim.mission.rate_limit_rad_s
-    q = sim.error_quaternion()
-    w = sim.state.omega_B
+    """(B, 20 + 3K) float32: what the co-design control features hold, for the whole satellite."""
     h = (sim.state.h_B / sim.h_scale_Nms).reshape(sim.B, -1)
-    return torch.cat((q, quat.derivative(q, w) * (2.0 / rl), w / rl, torch.tanh(FINE_GAIN * q[:, 1:]), h),
-                     dim=-1).float()
+    glob = control_globals(sim.error_quaternion(), sim.state.omega_B, sim.mission.rate_limit_rad_s)
+    return torch.cat((glob, h), dim=-1).float()
 
 
 class _Controller:
@@ -84,12 +81,13 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
         point = {"env_steps": steps, "updates": agent.updates, "wall_s": round(time.monotonic() - t0, 1),
                  **{k: s[k] for k in ("mean_return", "success_rate", "success_rate_at_0.25_deg",
                                       "success_rate_at_1_deg", "safety_violations", "median_final_error_deg",
-                                      "median_slew_time_ratio")}}
+                                      "median_final_rate_rad_s", "median_slew_time_ratio")}}
         curve.append(point)
         if log is not None:
             log(f"  {steps:,} steps, {agent.updates:,} updates, {point['wall_s']:,.0f} s: return "
                 f"{point['mean_return']:.1f}, success {100 * point['success_rate']:.0f} %, median error "
-                f"{point['median_final_error_deg']:.2f} deg")
+                f"{point['median_final_error_deg']:.2f} deg, median final rate "
+                f"{point['median_final_rate_rad_s']:.4f} rad/s")
         return point
 
     while steps + B <= t.total_env_steps:
@@ -99,7 +97,7 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
         else:
             with torch.no_grad():
                 a = agent.actor(o)
-            a = (a + torch.randn(a.shape, generator=gen) * t.exploration_noise).clamp(-1.0, 1.0)
+            a = (a + torch.randn(a.shape, generator=gen) * t.noise_at(steps)).clamp(-1.0, 1.0)
         out = sim.step(a.reshape(B, K, 3))
         buf.add({"o": o, "a": a, "r": out.reward.float(), "o2": flat_state(sim), "d": out.terminated})
         ended = (out.terminated | out.truncated).nonzero().flatten().tolist()

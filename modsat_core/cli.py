@@ -20,6 +20,26 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_update(args: argparse.Namespace) -> int:
+    from .bench_update import bench_update
+
+    if not (1 <= args.rounds <= 100 and 1 <= args.batch_size <= 65536 and all(2 <= n <= 10 for n in args.grids)
+            and all(4 <= h <= 2048 for h in args.hidden) and len(args.hidden) <= 4):
+        raise SystemExit("modsat bench update: --rounds must be 1 to 100, --batch-size 1 to 65,536, --grids between "
+                         "2 and 10, --hidden at most 4 sizes of 4 to 2,048")
+    report = bench_update(grids=tuple(args.grids), hidden=tuple(args.hidden), batch=args.batch_size,
+                          rounds=args.rounds)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(f"{report['unit']}, batch {report['batch_size']}, {report['hidden_sizes']}, {report['threads']} thread(s)")
+        for grid, r in report["results"].items():
+            print(f"  {grid}: flat {r['flat_ms']:.1f} ms, per-module {r['per-module_ms']:.1f} ms "
+                  f"(x{r['per-module_ratio']:.1f}), set {r['set_ms']:.1f} ms (x{r['set_ratio']:.1f}); "
+                  f"features {r['features_ms']:.1f} ms")
+    return 0
+
+
 def _cmd_bench_learning(args: argparse.Namespace) -> int:
     from .bench_learning import bench_learn, bench_rl_vs_ga
 
@@ -276,6 +296,13 @@ def build_parser() -> argparse.ArgumentParser:
     bs.add_argument("--seconds", type=float, default=2.0, help="minimum timing per case")
     bs.add_argument("--dtype", choices=["float32", "float64"], default="float32")
     bs.set_defaults(func=_cmd_bench)
+    bu = bsub.add_parser("update", help="milliseconds per TD3 update: flat, per-module and set networks, one thread")
+    bu.add_argument("--json", action="store_true", help="print the report as JSON")
+    bu.add_argument("--grids", type=int, nargs="+", default=[3, 5], help="grid sizes N (default 3 5)")
+    bu.add_argument("--hidden", type=int, nargs="+", default=[256, 256], help="wide layers (default 256 256)")
+    bu.add_argument("--batch-size", type=int, default=256, help="transitions per update (default 256)")
+    bu.add_argument("--rounds", type=int, default=5, help="timed rounds, networks taking turns (default 5)")
+    bu.set_defaults(func=_cmd_bench_update)
     for what, text in (("learn", "train a spec over several seeds: wall time, success at 0.25/1 deg, PD comparison"),
                        ("rl-vs-ga", "RL co-design vs the GA baseline at the same env-step budget, several seeds")):
         bl = bsub.add_parser(what, help=text)

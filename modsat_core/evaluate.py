@@ -46,6 +46,7 @@ class MonteCarloResult:
             "mean_return": float(np.mean([e["return"] for e in ep])),
             "std_return": float(np.std([e["return"] for e in ep])),
             "median_final_error_deg": median("final_error_deg"),
+            "median_final_rate_rad_s": median("final_rate_rad_s"),
             "median_settling_time_s": median("settling_time_s"),
             "median_slew_time_ratio": median("slew_time_ratio"),
             "median_effort_Nms": median("effort_Nms"),

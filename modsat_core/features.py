@@ -10,12 +10,15 @@ zero (the paper pads both to the same length):
     design   the 6 von Neumann neighbours' type one-hots (18; outside the grid counts as
              empty: the paper's padding layer), design progress d / D (1)           19
     control  q_BT (4), dq_BT/dt * 2 / rate_limit (4), omega_B / rate_limit (3),
-             tanh(30 q_BT,v) (3), this cell's wheel momentum / scale (3)            17
+             tanh(30 q_BT,v) (3), tanh(300 q_BT,v) (3), tanh(50 s/rad omega_B) (3),
+             this cell's wheel momentum / scale (3)                                 23
 
 The design part is the paper's (type, neighbours, position, distance). The control part is
 the paper's ``{q_e, q_e', omega, position, distance}`` (position and distance in the common
 part). The additions, written down in docs/learning.md: a fine-error channel
-``tanh(30 q_v)`` that keeps sub-degree errors visible to the network; the cell's own wheel
+``tanh(30 q_v)`` that keeps sub-degree errors visible to the network, and a finer pair
+(``tanh(300 q_v)``, ``tanh(50 omega)``) on the scale of the paper's 0.25 deg / 0.01 rad/s
+success condition (a 0.25 deg error is 0.57 there, 0.01 rad/s is 0.46); the cell's own wheel
 momentum (DESIGN.md); the actuator / module counts, without which a shared per-module
 controller cannot know what share of the total torque is its own; and a validity flag,
 without which no cell of a per-module critic can tell that the grid as a whole has no
@@ -30,13 +33,32 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from . import quaternion as quat
 from .mission import error_quaternion
 from .morphology import ACTUATOR, EMPTY, mass_properties_batched, valid_mask_batched
 
-N_COMMON, N_DESIGN, N_CONTROL = 11, 19, 17
+N_COMMON, N_DESIGN, N_CONTROL = 11, 19, 23
 N_FEATURES = N_COMMON + N_DESIGN + N_CONTROL
 FINE_GAIN = 30.0
+#: Gains of the finer error and rate channels (1 / rad, s / rad).
+FINER_GAIN = 300.0
+RATE_GAIN = 50.0
+#: Numbers of the satellite's state in the control part (all but the cell's wheel momentum).
+N_CONTROL_GLOBAL = N_CONTROL - 3
+
+
+def control_globals(q_BT: Tensor, omega_B: Tensor, rate_limit_rad_s: float, fine_gain: float = FINE_GAIN,
+                    finer_gain: float = FINER_GAIN, rate_gain: float = RATE_GAIN) -> Tensor:
+    """(B, 20) the satellite-wide control features from the error quaternion and body rate.
+
+    One function for the training features, the flat controller of ``bench control`` and
+    the TorchScript export (it is scriptable: hence the gains as default arguments), so the
+    three cannot drift apart.
+    """
+    w, v = q_BT[:, :1], q_BT[:, 1:]
+    qdot = torch.cat((-0.5 * (v * omega_B).sum(-1, keepdim=True),
+                      0.5 * (w * omega_B + torch.cross(v, omega_B, dim=-1))), dim=-1)
+    return torch.cat((q_BT, qdot * (2.0 / rate_limit_rad_s), omega_B / rate_limit_rad_s,
+                      torch.tanh(fine_gain * v), torch.tanh(finer_gain * v), torch.tanh(rate_gain * omega_B)), dim=-1)
 
 
 @dataclass
@@ -135,20 +157,18 @@ def cell_observation(
         valid[design] = valid_mask_batched(grids[design])
     x[..., 10] = valid.to(torch.float32).unsqueeze(-1)
 
-    if bool(design.any()):
-        nb = _one_hot(neighbour_types(grids)).reshape(B, C, 18)
-        prog = (design_step.to(torch.float32) / design_steps).reshape(B, 1, 1).expand(B, C, 1)
-        dpart = torch.cat((nb, prog), dim=-1) * design.reshape(B, 1, 1)
-        x[..., N_COMMON:N_COMMON + N_DESIGN] = dpart
+    if bool(design.any()):  # the design part of the designing rows only (most rows fly)
+        rows = design.nonzero().squeeze(-1)
+        nb = _one_hot(neighbour_types(grids[rows])).reshape(len(rows), C, 18)
+        prog = (design_step[rows].to(torch.float32) / design_steps).reshape(-1, 1, 1).expand(len(rows), C, 1)
+        x[rows, :, N_COMMON:N_COMMON + N_DESIGN] = torch.cat((nb, prog), dim=-1)
 
     fly = ~design
     if bool(fly.any()):
         q_e = error_quaternion(phys.q_TN, phys.q_BN).to(torch.float32)
-        w = phys.omega_B.to(torch.float32)
-        qdot = quat.derivative(q_e, w) * (2.0 / rate_limit_rad_s)
-        glob = torch.cat((q_e, qdot, w / rate_limit_rad_s, torch.tanh(FINE_GAIN * q_e[:, 1:])), dim=-1)  # (B, 14)
+        glob = control_globals(q_e, phys.omega_B.to(torch.float32), rate_limit_rad_s)
         occupied = (flat != EMPTY).unsqueeze(-1).to(torch.float32)
-        cpart = torch.cat((glob.unsqueeze(1).expand(B, C, 14), phys.h_cells.to(torch.float32)), dim=-1)
+        cpart = torch.cat((glob.unsqueeze(1).expand(B, C, N_CONTROL_GLOBAL), phys.h_cells.to(torch.float32)), dim=-1)
         cpart = cpart * occupied * fly.reshape(B, 1, 1).to(torch.float32)
         x[..., N_COMMON + N_DESIGN:] = cpart
 

@@ -158,9 +158,7 @@ class GARun:
         return False
 
     def train(self, on_progress, on_checkpoint, should_stop, checkpoint: dict | None):
-        from .features import N_FEATURES
-        from .td3 import CellActor
-        from .train import CHECKPOINT_VERSION, RunResult, run_files
+        from .train import CHECKPOINT_VERSION, RunResult, actor_from_state, run_files
 
         def wrap(state: dict) -> None:
             on_checkpoint({"version": CHECKPOINT_VERSION, "algorithm": "ga", "env_steps": state["used"],
@@ -179,9 +177,7 @@ class GARun:
             self._next_generation()
         on_progress({"env_steps": self.used, "total_env_steps": total, "updates": 0, "phase": "evaluating",
                      "eval": None})
-        actor = CellActor(N_FEATURES, list(self.spec.training.hidden_sizes))
-        actor.load_state_dict(self.best_actor["actor"])
-        actor.eval()
+        actor = actor_from_state(self.spec, self.best_actor["actor"])
         grid = np.asarray(self.best_actor["grid"], dtype=np.int64)
         extra = {"designs": self.records, "generations": self.generations}
         files, summary = run_files(self.spec, self.curve, actor, grid, extra)

@@ -82,9 +82,11 @@ def reward(
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Per-step reward (Elkins et al. 2020) and safety violation.
 
-    ``exp(-phi / scale)``, minus ``no_progress_penalty`` when phi did not decrease, plus
+    ``exp(-phi / scale)``, minus ``no_progress_penalty`` when phi did not decrease (outside the
+    tolerance cone only, unless ``no_progress_penalty_in_tolerance``), plus
     ``in_tolerance_bonus`` while phi <= tolerance (and, with ``bonus_needs_settled``, the rate
-    <= ``rate_tolerance_rad_s``); a rate above the limit ends the episode
+    <= ``rate_tolerance_rad_s``), plus ``settle_bonus * exp(-|omega| / settle_rate_scale_rad_s)`` while
+    phi <= tolerance; a rate above the limit ends the episode
     with ``-safety_penalty`` (minus ``safety_penalty_per_remaining_step`` for each of the
     ``steps_left`` control steps it had left). Returns (reward, in_tolerance, violated), each (B,).
     """
@@ -92,9 +94,14 @@ def reward(
     tol = mission.tolerance_deg * quat.DEG
     in_tol = phi_rad <= tol
     rew = torch.exp(-phi_rad / r.error_scale_rad)
-    rew = rew - r.no_progress_penalty * (phi_rad >= phi_prev_rad).to(rew.dtype)
+    no_progress = phi_rad >= phi_prev_rad
+    if not r.no_progress_penalty_in_tolerance:
+        no_progress = no_progress & ~in_tol
+    rew = rew - r.no_progress_penalty * no_progress.to(rew.dtype)
     bonus = in_tol & (omega_norm <= mission.rate_tolerance_rad_s) if r.bonus_needs_settled else in_tol
     rew = rew + r.in_tolerance_bonus * bonus.to(rew.dtype)
+    if r.settle_bonus:
+        rew = rew + r.settle_bonus * in_tol.to(rew.dtype) * torch.exp(-omega_norm / r.settle_rate_scale_rad_s)
     violated = omega_norm > mission.rate_limit_rad_s
     penalty = torch.full_like(rew, -r.safety_penalty)
     if steps_left is not None and r.safety_penalty_per_remaining_step:
@@ -111,7 +118,7 @@ def return_bounds(mission: Mission) -> tuple[float, float]:
     # A violation at step k: k - 1 steps of at least per_step_min, then the penalty.
     worst_violation = -r.safety_penalty + (T - 1) * min(per_step_min, -r.safety_penalty_per_remaining_step)
     low = min(worst_violation, T * per_step_min)
-    high = mission.episode_steps * (1.0 + r.in_tolerance_bonus)
+    high = mission.episode_steps * (1.0 + r.in_tolerance_bonus + r.settle_bonus)
     return low, high
 
 

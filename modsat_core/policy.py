@@ -10,15 +10,14 @@ import torch
 from torch import Tensor, nn
 
 from .codesign_env import seed_grid
-from .features import CellObs, PhysState, cell_observation
+from .features import N_COMMON, N_CONTROL_GLOBAL, N_DESIGN, CellObs, PhysState, cell_observation, control_globals
 from .morphology import ACTUATOR, seed_component_batched
 from .slew import SlewSim
 from .spec import JobSpec
-from .td3 import CellActor
 
 
 @torch.no_grad()
-def design_with(actor: CellActor, spec: JobSpec) -> np.ndarray:
+def design_with(actor: nn.Module, spec: JobSpec) -> np.ndarray:
     """The grid the deterministic NCA grows from the seed module in ``design_steps`` steps."""
     N, D = spec.design.grid_size, spec.design.design_steps
     grid = torch.as_tensor(seed_grid(N)).unsqueeze(0)
@@ -38,7 +37,7 @@ class PolicyController:
     as the actor's cells, so unit k is the k-th actuator cell.
     """
 
-    def __init__(self, actor: CellActor, grid: np.ndarray, spec: JobSpec):
+    def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
         self.actor, self.spec = actor, spec
         self.grid = torch.as_tensor(np.asarray(grid), dtype=torch.long)
         self.N = self.grid.shape[0]
@@ -67,7 +66,7 @@ class ExportedController(nn.Module):
     The design's constant per-cell features are baked in as buffers.
     """
 
-    def __init__(self, actor: CellActor, grid: np.ndarray, spec: JobSpec):
+    def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
         super().__init__()
         N = np.asarray(grid).shape[0]
         C = N**3
@@ -77,40 +76,36 @@ class ExportedController(nn.Module):
                           torch.zeros(1, C, 3))
         D = spec.design.design_steps
         base = cell_observation(ctrl.grid.unsqueeze(0), torch.tensor([D]), D, probe, spec.mission.rate_limit_rad_s)
-        from .features import FINE_GAIN, N_COMMON, N_DESIGN
-
         self.register_buffer("base_x", base.x[0].clone())
         self.register_buffer("occupied", (ctrl.grid.reshape(-1) != 0).float().unsqueeze(-1))
         self.register_buffer("act_cells", ctrl.act_cells.clone())
-        self.register_buffer("act_mask", (ctrl.grid.reshape(-1) == ACTUATOR).float().unsqueeze(-1))
+        self.register_buffer("act_mask", (ctrl.grid.reshape(-1) == ACTUATOR).unsqueeze(0))
+        self.register_buffer("value_mask", (ctrl.grid.reshape(-1) != 0).unsqueeze(0))
         self.c0 = N_COMMON + N_DESIGN
-        self.fine_gain = FINE_GAIN
+        self.n_glob = N_CONTROL_GLOBAL
         self.rate_limit = spec.mission.rate_limit_rad_s
         self.tau_max = spec.modules.torque_scale_Nm
         cap = spec.modules.momentum_capacity_Nms
         self.h_scale = cap if cap is not None else spec.modules.torque_scale_Nm
-        self.trunk = actor.trunk
-        self.head = actor.control_head
+        self.actor = actor
 
     def forward(self, q_BT: Tensor, omega_B: Tensor, h_B: Tensor) -> Tensor:
         B = q_BT.shape[0]
         C = self.base_x.shape[0]
         q = q_BT * torch.where(q_BT[:, :1] < 0, -1.0, 1.0)
-        w, v = q[:, :1], q[:, 1:]
-        qdot = torch.cat((-0.5 * (v * omega_B).sum(-1, keepdim=True),
-                          0.5 * (w * omega_B + torch.cross(v, omega_B, dim=-1))), dim=-1)
-        glob = torch.cat((q, qdot * (2.0 / self.rate_limit), omega_B / self.rate_limit,
-                          torch.tanh(self.fine_gain * v)), dim=-1)
+        glob = control_globals(q, omega_B, self.rate_limit)
         x = self.base_x.unsqueeze(0).repeat(B, 1, 1)
         h_cells = torch.zeros(B, C, 3, dtype=x.dtype)
         h_cells[:, self.act_cells] = h_B.to(x.dtype) / self.h_scale
-        x[:, :, self.c0:self.c0 + 14] = glob.unsqueeze(1).to(x.dtype) * self.occupied
-        x[:, :, self.c0 + 14:self.c0 + 17] = h_cells * self.occupied
-        a = torch.tanh(self.head(self.trunk(x))) * self.act_mask
+        g0, g1 = self.c0, self.c0 + self.n_glob
+        x[:, :, g0:g1] = glob.unsqueeze(1).to(x.dtype) * self.occupied
+        x[:, :, g1:g1 + 3] = h_cells * self.occupied
+        design = torch.zeros(B, dtype=torch.bool)
+        a = self.actor.act(x, self.act_mask.expand(B, C), self.value_mask.expand(B, C), design)
         return a[:, self.act_cells] * self.tau_max
 
 
-def export_torchscript(actor: CellActor, grid: np.ndarray, spec: JobSpec) -> bytes:
+def export_torchscript(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> bytes:
     """TorchScript bytes of :class:`ExportedController` (load with ``torch.jit.load``)."""
     with warnings.catch_warnings():
         # TorchScript is deprecated in favour of torch.export but still the format that

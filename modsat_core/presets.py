@@ -32,6 +32,20 @@ _PAPER_TRAINING = {
 _NO_EARLY_EXIT = {"safety_penalty_per_remaining_step": 1.0}
 
 
+# The CPU presets' recipe (docs/learning.md, "Fourth round"): the set network, wide and with
+# fast learning rates, one update per env step, exploration (actions and designs) falling to
+# zero over the budget, and a reward that pays holding still inside the cone instead of
+# charging it the progress penalty.
+_CPU_TRAINING = {
+    "network": "set", "hidden_sizes": [256, 256], "actor_lr": 1e-3, "critic_lr": 1e-3, "batch_size": 256,
+    "train_frequency": 1, "exploration_noise": 0.1, "exploration_noise_final": 0.0,
+    "design_exploration": 0.1, "design_exploration_final": 0.0, "design_exploration_episodes": 0.25,
+    "device": "cpu",
+}
+_HOLD_REWARD = {**_NO_EARLY_EXIT, "no_progress_penalty_in_tolerance": False, "settle_bonus": 5.0,
+                "settle_rate_scale_rad_s": 0.05}
+
+
 def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
     return JobSpec.model_validate({
         "name": f"{'paper' if algorithm == 'td3-codesign' else 'ga'}-{n}x{n}x{n}",
@@ -49,7 +63,7 @@ PRESETS: dict[str, JobSpec] = {
     "paper-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "td3-codesign"),
     "ga-3x3x3": _paper(3, PAPER_TAU_3X3X3_NM, "ga"),
     "ga-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "ga"),
-    # A demo that trains in about a minute on 2 CPU cores: short episodes, small network.
+    # A demo on one core in about 10 minutes: short episodes (120 steps), 30-90 deg slews, 1 deg.
     "quick": JobSpec.model_validate({
         "name": "quick",
         "algorithm": "td3-codesign",
@@ -57,25 +71,25 @@ PRESETS: dict[str, JobSpec] = {
         "design": {"grid_size": 3, "repair": True},
         "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
         "mission": {"episode_steps": 120, "slew_min_deg": 30.0, "slew_max_deg": 90.0, "tolerance_deg": 1.0,
-                    "reward": _NO_EARLY_EXIT},
+                    "reward": _HOLD_REWARD},
         "training": {
-            "total_env_steps": 30_000, "num_envs": 16, "hidden_sizes": [64, 64], "batch_size": 128,
-            "train_frequency": 4, "buffer_size": 100_000, "learning_starts": 2_000, "eval_every_steps": 5_000,
-            "eval_episodes": 16, "checkpoint_every_steps": 10_000, "device": "cpu",
+            **_CPU_TRAINING, "total_env_steps": 30_000, "num_envs": 16, "buffer_size": 100_000,
+            "learning_starts": 2_000, "eval_every_steps": 5_000, "eval_episodes": 16,
+            "checkpoint_every_steps": 10_000,
         },
         "evaluation": {"episodes": 32},
     }),
-    # The paper's 3x3x3 mission, tuned for a 2-core CPU: smaller network and batch.
+    # The paper's 3x3x3 mission (500 steps, 30-150 deg, 0.25 deg) for a 2-core CPU.
     "cpu-3x3x3": JobSpec.model_validate({
         "name": "cpu-3x3x3",
         "algorithm": "td3-codesign",
         "design": {"grid_size": 3, "repair": True},
         "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
-        "mission": {"reward": _NO_EARLY_EXIT},
+        "mission": {"reward": _HOLD_REWARD},
         "training": {
-            "total_env_steps": 400_000, "num_envs": 32, "hidden_sizes": [128, 128], "batch_size": 256,
-            "buffer_size": 400_000, "learning_starts": 10_000, "eval_every_steps": 20_000,
-            "eval_episodes": 32, "checkpoint_every_steps": 50_000, "device": "cpu",
+            **_CPU_TRAINING, "total_env_steps": 100_000, "num_envs": 16, "buffer_size": 200_000,
+            "learning_starts": 5_000, "eval_every_steps": 10_000, "eval_episodes": 16,
+            "checkpoint_every_steps": 20_000,
         },
     }),
 }

@@ -134,6 +134,33 @@ class RewardSpec(_Section):
         1.0, ge=0.0, le=100.0, description="Subtracted when the error angle did not decrease."
     )
     in_tolerance_bonus: float = Field(9.0, ge=0.0, le=1000.0, description="Added while phi <= tolerance.")
+    no_progress_penalty_in_tolerance: bool = Field(
+        True,
+        description=(
+            "Charge `no_progress_penalty` inside the tolerance cone too (the paper's reward). There a "
+            "satellite held still never decreases phi and pays it on every step, while one that "
+            "oscillates pays it on about half: the reward prefers chattering to holding. `false` "
+            "charges it only outside the cone."
+        ),
+    )
+    settle_bonus: float = Field(
+        0.0,
+        ge=0.0,
+        le=1000.0,
+        description=(
+            "Added while phi <= tolerance, times exp(-|omega| / `settle_rate_scale_rad_s`): a "
+            "continuous reward for being still inside the cone (0: the paper's reward)."
+        ),
+    )
+    settle_rate_scale_rad_s: float = Field(
+        0.05,
+        gt=0.0,
+        le=10.0,
+        description=(
+            "Rate scale of `settle_bonus`. Wider than the rate tolerance on purpose: a policy that "
+            "chatters at 0.1 rad/s must still see the term grow as it slows down."
+        ),
+    )
     bonus_needs_settled: bool = Field(
         False,
         description=(
@@ -199,8 +226,17 @@ class Training(_Section):
 
     total_env_steps: int = Field(200_000, ge=1, le=1_000_000_000, description="Budget in control steps.")
     num_envs: int = Field(16, ge=1, le=8192, description="Episodes simulated in parallel.")
+    network: Literal["per-module", "set"] = Field(
+        "per-module",
+        description=(
+            "`per-module`: the paper's network, its trunk run on every cell, per-cell twin critics "
+            "averaged. `set`: a small per-cell encoder, masked pooling over the satellite's cells, the "
+            "wide layers once per satellite, per-cell design and control heads (docs/learning.md)."
+        ),
+    )
     hidden_sizes: list[Annotated[int, Field(ge=4, le=2048)]] = Field(
-        default_factory=lambda: [400, 300], min_length=1, max_length=4, description="Shared trunk layers."
+        default_factory=lambda: [400, 300], min_length=1, max_length=4,
+        description="Wide layers: the shared trunk (`per-module`) or the per-satellite layers (`set`).",
     )
     actor_lr: float = Field(3e-4, gt=0.0, le=1.0, description="Adam learning rate of the shared actor.")
     critic_lr: float = Field(3e-3, gt=0.0, le=1.0, description="Adam learning rate of the twin critics.")
@@ -209,8 +245,37 @@ class Training(_Section):
     gamma: float = Field(0.99, ge=0.0, lt=1.0, description="Discount factor.")
     tau: float = Field(0.005, gt=0.0, le=1.0, description="Polyak factor (the paper's 0.995 written the other way).")
     exploration_noise: float = Field(0.2, ge=0.0, le=2.0, description="Std of the Gaussian action noise.")
+    exploration_noise_final: float | None = Field(
+        None,
+        ge=0.0,
+        le=2.0,
+        description=(
+            "If set, the exploration noise falls linearly from `exploration_noise` (when learning "
+            "starts) to this value (at the end of the budget). null = constant noise (the paper)."
+        ),
+    )
     design_exploration: float = Field(
         0.1, ge=0.0, le=1.0, description="Probability that a cell's design action is replaced by a random type."
+    )
+    design_exploration_episodes: float = Field(
+        1.0,
+        ge=0.0,
+        le=1.0,
+        description=(
+            "Share of episodes whose design phase is explored (random cell swaps and action noise), "
+            "drawn per episode. The others grow the policy's own design without noise, so that most "
+            "flights train the controller on the design being learned. 1 = every episode (the paper)."
+        ),
+    )
+    design_exploration_final: float | None = Field(
+        None,
+        ge=0.0,
+        le=1.0,
+        description=(
+            "If set, `design_exploration` falls linearly to this value over the budget, as the "
+            "exploration noise does: designs drawn widely while the controller learns to fly many "
+            "of them, then narrowed. null = constant."
+        ),
     )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
     noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
@@ -221,6 +286,21 @@ class Training(_Section):
     eval_episodes: int = Field(16, ge=1, le=1000, description="Episodes of each evaluation on the curve.")
     checkpoint_every_steps: int = Field(50_000, ge=1, le=1_000_000_000)
     device: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` uses a GPU where torch sees one.")
+
+    def _schedule(self, start: float, final: float | None, env_steps: int) -> float:
+        if final is None:
+            return start
+        span = max(self.total_env_steps - self.learning_starts, 1)
+        frac = min(max((env_steps - self.learning_starts) / span, 0.0), 1.0)
+        return start + frac * (final - start)
+
+    def noise_at(self, env_steps: int) -> float:
+        """The exploration noise std after ``env_steps`` steps (see `exploration_noise_final`)."""
+        return self._schedule(self.exploration_noise, self.exploration_noise_final, env_steps)
+
+    def design_exploration_at(self, env_steps: int) -> float:
+        """The design exploration probability after ``env_steps`` steps."""
+        return self._schedule(self.design_exploration, self.design_exploration_final, env_steps)
 
 
 class GA(_Section):

@@ -1,6 +1,7 @@
-"""TD3 (Fujimoto et al. 2018): networks, replay buffer and the update, as plain pieces.
+"""TD3 (Fujimoto et al. 2018): the update and the replay buffer, as plain pieces.
 
-The update is one function over any actor/critic pair that follows a small protocol:
+The networks live in :mod:`modsat_core.networks`. The update is one function over any
+actor/critic pair that follows a small protocol:
 ``actor(obs) -> action`` and ``actor.finish(obs, action)`` (clamp and mask a perturbed
 action), ``critic(obs, action) -> (q1, q2)`` each (B,). The co-design networks
 (per-module, masked) and a plain MLP pair for standard gymnasium tasks both follow it, so
@@ -14,94 +15,6 @@ from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
-
-from .features import CellObs
-
-
-def mlp(sizes: list[int]) -> nn.Sequential:
-    """Linear layers with ReLU between them (none after the last)."""
-    layers: list[nn.Module] = []
-    for i in range(len(sizes) - 1):
-        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
-        if i < len(sizes) - 2:
-            layers.append(nn.ReLU())
-    return nn.Sequential(*layers)
-
-
-# ----------------------------------------------------------------------------- networks
-
-
-class CellActor(nn.Module):
-    """Shared trunk over per-cell features, a design head and a control head (paper Fig. 6)."""
-
-    def __init__(self, n_features: int, hidden: list[int]):
-        super().__init__()
-        self.trunk = nn.Sequential(mlp([n_features, *hidden]), nn.ReLU())
-        self.design_head = nn.Linear(hidden[-1], 3)
-        self.control_head = nn.Linear(hidden[-1], 3)
-
-    def forward(self, obs: CellObs) -> Tensor:
-        """(B, C, 3) actions in [-1, 1], zero on cells whose action has no effect."""
-        z = self.trunk(obs.x)
-        raw = torch.where(obs.design.reshape(-1, 1, 1), self.design_head(z), self.control_head(z))
-        return torch.tanh(raw) * obs.act_mask.unsqueeze(-1)
-
-    @staticmethod
-    def finish(obs: CellObs, action: Tensor) -> Tensor:
-        return action.clamp(-1.0, 1.0) * obs.act_mask.unsqueeze(-1)
-
-
-class CellCritic(nn.Module):
-    """Twin per-module critics; a satellite's value is the masked mean over its cells.
-
-    Each cell's critic sees its features, its own action and the mean action of the cells
-    whose actions act (the satellite's net command, per actuator). Without the last part
-    only the actuator cells' values depend on the action at all: with one actuator in 27
-    modules, 26/27 of the value would be blind to control and the actor's gradient
-    diluted as much (docs/learning.md).
-    """
-
-    def __init__(self, n_features: int, hidden: list[int]):
-        super().__init__()
-        self.q1 = mlp([n_features + 6, *hidden, 1])
-        self.q2 = mlp([n_features + 6, *hidden, 1])
-
-    def forward(self, obs: CellObs, action: Tensor) -> tuple[Tensor, Tensor]:
-        m = obs.act_mask.unsqueeze(-1).to(action.dtype)
-        mean_a = (action * m).sum(dim=1) / m.sum(dim=1).clamp(min=1.0)
-        xa = torch.cat((obs.x, action, mean_a.unsqueeze(1).expand_as(action)), dim=-1)
-        w = obs.value_mask.to(xa.dtype)
-        denom = w.sum(dim=1).clamp(min=1.0)
-        q1 = (self.q1(xa).squeeze(-1) * w).sum(dim=1) / denom
-        q2 = (self.q2(xa).squeeze(-1) * w).sum(dim=1) / denom
-        return q1, q2
-
-
-class MLPActor(nn.Module):
-    """Deterministic actor for flat observations; actions in [-1, 1]^act_dim."""
-
-    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
-        super().__init__()
-        self.net = mlp([obs_dim, *hidden, act_dim])
-
-    def forward(self, obs: Tensor) -> Tensor:
-        return torch.tanh(self.net(obs))
-
-    @staticmethod
-    def finish(obs: Tensor, action: Tensor) -> Tensor:
-        return action.clamp(-1.0, 1.0)
-
-
-class MLPCritic(nn.Module):
-    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
-        super().__init__()
-        self.q1 = mlp([obs_dim + act_dim, *hidden, 1])
-        self.q2 = mlp([obs_dim + act_dim, *hidden, 1])
-
-    def forward(self, obs: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
-        xa = torch.cat((obs, action), dim=-1)
-        return self.q1(xa).squeeze(-1), self.q2(xa).squeeze(-1)
-
 
 # ----------------------------------------------------------------------------- update
 
@@ -148,9 +61,17 @@ class TD3:
         self.updates += 1
         info = {"critic_loss": critic_loss.item(), "q": q1.mean().item()}
         if self.updates % cfg.policy_delay == 0:
-            actor_loss = -self.critic(obs, self.actor(obs))[0].mean()
-            self.actor_opt.zero_grad(set_to_none=True)
-            actor_loss.backward()
+            # The critic is held fixed here: no gradients for its weights (only through it
+            # to the action), which also skips the backward pass of its action-free parts.
+            for p in self.critic.parameters():
+                p.requires_grad_(False)
+            try:
+                actor_loss = -self.critic(obs, self.actor(obs))[0].mean()
+                self.actor_opt.zero_grad(set_to_none=True)
+                actor_loss.backward()
+            finally:
+                for p in self.critic.parameters():
+                    p.requires_grad_(True)
             self.actor_opt.step()
             soft_update(self.actor_target, self.actor, cfg.tau)
             soft_update(self.critic_target, self.critic, cfg.tau)

@@ -12,7 +12,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from .td3 import TD3, MLPActor, MLPCritic, ReplayBuffer, TD3Config
+from .networks import MLPActor, MLPCritic
+from .td3 import TD3, ReplayBuffer, TD3Config
 
 
 def evaluate_gym(env_id: str, actor: MLPActor, scale: np.ndarray, episodes: int, seed: int) -> float:

@@ -26,11 +26,12 @@ from .codesign_env import Compact, CoDesignEnv, effective_invalid_penalty, obser
 from .evaluate import monte_carlo
 from .features import N_FEATURES, CellObs
 from .morphology import ACTUATOR, EMPTY, is_valid, mass_properties
+from .networks import finish, make_actor, make_critic
 from .pd import PDController
 from .policy import PolicyController, design_with, export_torchscript
 from .slew import Design
 from .spec import JobSpec
-from .td3 import TD3, CellActor, CellCritic, ReplayBuffer, TD3Config
+from .td3 import TD3, ReplayBuffer, TD3Config
 
 ProgressFn = Callable[[dict], None]
 CheckpointFn = Callable[[dict], None]
@@ -41,7 +42,9 @@ REPORT_TOLERANCES_DEG = (0.25, 1.0)
 #: The replay buffer goes into checkpoints only up to this size (bigger buffers are refilled
 #: after a resume: learning restarts after ``learning_starts`` fresh transitions).
 CHECKPOINT_BUFFER_LIMIT_BYTES = 256 * 2**20
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2
+#: Version 2: the network is named in the file (``per-module`` or ``set``), 53 features.
+POLICY_VERSION = 2
 
 
 def resolve_device(name: str) -> str:
@@ -111,24 +114,41 @@ class RunResult:
 # ----------------------------------------------------------------------------- policy file
 
 
-def policy_bytes(actor: CellActor, grid: np.ndarray | None, spec: JobSpec) -> bytes:
+def new_actor(spec: JobSpec) -> torch.nn.Module:
+    """The co-design actor of a spec (``training.network``, ``training.hidden_sizes``)."""
+    return make_actor(spec.training.network, N_FEATURES, list(spec.training.hidden_sizes))
+
+
+def actor_from_state(spec: JobSpec, state: dict) -> torch.nn.Module:
+    """A CPU actor in eval mode holding ``state`` (a state dict of :func:`new_actor`'s actor)."""
+    actor = new_actor(spec)
+    actor.load_state_dict(state)
+    actor.eval()
+    return actor
+
+
+def policy_bytes(actor: torch.nn.Module, grid: np.ndarray | None, spec: JobSpec) -> bytes:
     buf = io.BytesIO()
     torch.save({
-        "format": "modsat-policy", "version": 1, "spec": spec.model_dump(mode="json"),
-        "grid": None if grid is None else np.asarray(grid).tolist(),
+        "format": "modsat-policy", "version": POLICY_VERSION, "spec": spec.model_dump(mode="json"),
+        "grid": None if grid is None else np.asarray(grid).tolist(), "network": spec.training.network,
         "hidden_sizes": list(spec.training.hidden_sizes), "n_features": N_FEATURES,
         "actor": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
     }, buf)
     return buf.getvalue()
 
 
-def load_policy(data: bytes) -> tuple[CellActor, np.ndarray | None, JobSpec]:
+def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpec]:
     """Read ``policy.pt``: the actor (CPU, eval mode), its design grid and the run's spec."""
     d = torch.load(io.BytesIO(data), map_location="cpu", weights_only=False)
     if not isinstance(d, dict) or d.get("format") != "modsat-policy":
         raise ValueError("not a modsat policy file")
+    if d.get("version") != POLICY_VERSION or d.get("n_features") != N_FEATURES:
+        raise ValueError(f"policy file version {d.get('version')} ({d.get('n_features')} features) is from an "
+                         f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features): "
+                         "train the run again")
     spec = JobSpec.model_validate(d["spec"])
-    actor = CellActor(d["n_features"], d["hidden_sizes"])
+    actor = make_actor(d["network"], d["n_features"], d["hidden_sizes"])
     actor.load_state_dict(d["actor"])
     actor.eval()
     grid = None if d["grid"] is None else np.asarray(d["grid"], dtype=np.int64)
@@ -143,7 +163,7 @@ def curve_seed(spec: JobSpec) -> int:
     return (spec.evaluation.seed + 7919) % (2**31)
 
 
-def evaluate_design(actor: CellActor, grid: np.ndarray, spec: JobSpec, *, episodes: int, seed: int,
+def evaluate_design(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, *, episodes: int, seed: int,
                     record: int = 0, dtype=torch.float32, device: str = "cpu"):
     """Monte-Carlo of the actor flying ``grid``; None if the grid is not a valid satellite."""
     if not is_valid(grid):
@@ -152,7 +172,7 @@ def evaluate_design(actor: CellActor, grid: np.ndarray, spec: JobSpec, *, episod
                        spec.modules, episodes=episodes, seed=seed, record=record, dtype=dtype, device=device)
 
 
-def curve_point(actor: CellActor, grid: np.ndarray, spec: JobSpec, env_steps: int, updates: int,
+def curve_point(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, env_steps: int, updates: int,
                 penalty: float) -> dict:
     mc = evaluate_design(actor, grid, spec, episodes=spec.training.eval_episodes, seed=curve_seed(spec))
     n_mod = int((np.asarray(grid) != EMPTY).sum())
@@ -181,7 +201,7 @@ def design_report(grid: np.ndarray, spec: JobSpec) -> dict:
     return out
 
 
-def final_evaluation(actor: CellActor, grid: np.ndarray, spec: JobSpec, episodes: int | None = None) -> dict:
+def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: int | None = None) -> dict:
     """The policy and the PD baseline on the same design and the same seeded slews."""
     ev = spec.evaluation
     n = episodes or ev.episodes
@@ -229,7 +249,7 @@ def curve_png(curve: list[dict], title: str) -> bytes:
     return buf.getvalue()
 
 
-def run_files(spec: JobSpec, curve: list[dict], actor: CellActor, grid: np.ndarray, extra: dict | None = None
+def run_files(spec: JobSpec, curve: list[dict], actor: torch.nn.Module, grid: np.ndarray, extra: dict | None = None
               ) -> tuple[dict[str, bytes], dict]:
     """All output files of a finished run, and a short summary of its evaluation."""
     import json
@@ -269,8 +289,8 @@ class TD3Run:
         self.env = CoDesignEnv(spec, self.t.num_envs, seed=spec.seed, fixed_grid=self.fixed_grid, device=device)
         torch.manual_seed(spec.seed)
         hidden = list(self.t.hidden_sizes)
-        actor = CellActor(N_FEATURES, hidden).to(device)
-        critic = CellCritic(N_FEATURES, hidden).to(device)
+        actor = make_actor(self.t.network, N_FEATURES, hidden).to(device)
+        critic = make_critic(self.t.network, N_FEATURES, hidden).to(device)
         self.agent = TD3(actor, critic, TD3Config(
             gamma=self.t.gamma, tau=self.t.tau, policy_noise=self.t.policy_noise, noise_clip=self.t.noise_clip,
             policy_delay=self.t.policy_delay, actor_lr=self.t.actor_lr, critic_lr=self.t.critic_lr))
@@ -287,35 +307,57 @@ class TD3Run:
         self.best: dict | None = None  # {"mean_return", "actor", "grid", "env_steps"}
         self.recent: list[dict] = []  # finished training episodes since the last progress call
         self.last_info: dict = {}
+        self.explore_design = torch.ones(self.env.B, dtype=torch.bool, device=device)
 
     # ------------------------------------------------------------------ acting
     def _act(self, obs: CellObs) -> torch.Tensor:
         B, C = obs.x.shape[0], obs.x.shape[1]
+        with torch.no_grad():
+            a = self.agent.actor(obs)
+        noise = torch.randn(a.shape, generator=self.gen, device=self.device) * self.t.noise_at(self.env_steps)
+        explore = self._explored_designs(obs)
+        # Designing rows of an episode whose design is not explored grow the policy's own design.
+        a = a + noise * (~obs.design | explore).reshape(B, 1, 1)
+        p_swap = self.t.design_exploration_at(self.env_steps)
+        if bool(obs.design.any()) and p_swap > 0:
+            # Design exploration: a cell's type is replaced by a random one.
+            swap = (torch.rand((B, C, 1), generator=self.gen, device=self.device) < p_swap)
+            swap &= (obs.design & explore).reshape(B, 1, 1)
+            rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
+            a = torch.where(swap, rand, a)
         if self.env_steps < self.t.learning_starts:
-            a = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
-        else:
-            with torch.no_grad():
-                a = self.agent.actor(obs)
-            a = a + torch.randn(a.shape, generator=self.gen, device=self.device) * self.t.exploration_noise
-            if bool(obs.design.any()) and self.t.design_exploration > 0:
-                # Design exploration: a cell's type is replaced by a random one.
-                swap = (torch.rand((B, C, 1), generator=self.gen, device=self.device) < self.t.design_exploration)
-                swap &= obs.design.reshape(B, 1, 1)
-                rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
-                a = torch.where(swap, rand, a)
-        return CellActor.finish(obs, a)
+            # Before learning starts the flights are flown with uniformly random torques, on the
+            # designs the (untrained) policy grows: random designs there (the paper's uniform
+            # random actions in both phases) are mostly unflyable, and left the critic with
+            # almost no flight data of the designs it then had to fly (docs/learning.md).
+            rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
+            a = torch.where(obs.design.reshape(B, 1, 1), a, rand)
+        return finish(obs, a)
+
+    def _explored_designs(self, obs: CellObs) -> torch.Tensor:
+        """(B,) bool: the episodes whose design phase is explored (`design_exploration_episodes`).
+
+        Drawn once per episode, when its design phase starts."""
+        q = self.t.design_exploration_episodes
+        if q >= 1.0:
+            return torch.ones_like(obs.design)
+        starting = obs.design & (self.env.design_step == 0)
+        if bool(starting.any()):
+            draw = torch.rand(self.env.B, generator=self.gen, device=self.device) < q
+            self.explore_design = torch.where(starting, draw, self.explore_design)
+        return self.explore_design
 
     def current_grid(self) -> np.ndarray:
         if self.fixed_grid is not None:
             return self.fixed_grid
         return design_with(self._eval_actor(), self.spec)
 
-    def _cpu_actor(self) -> CellActor:
+    def _cpu_actor(self) -> torch.nn.Module:
         a = copy.deepcopy(self.agent.actor).cpu()
         a.eval()
         return a
 
-    def _eval_actor(self) -> CellActor:
+    def _eval_actor(self) -> torch.nn.Module:
         return self.agent.actor if self.device == "cpu" else self._cpu_actor()
 
     # ------------------------------------------------------------------ loop
@@ -373,8 +415,9 @@ class TD3Run:
         grid = self.current_grid()
         point = curve_point(actor, grid, self.spec, self.env_steps, self.agent.updates, self.env.penalty)
         self.curve.append(point)
-        if self.best is None or point["mean_return"] > self.best["mean_return"]:
-            self.best = {"mean_return": point["mean_return"], "env_steps": self.env_steps, "grid": grid,
+        if self.best is None or _rank(point) > _rank(self.best):
+            self.best = {"mean_return": point["mean_return"], "success_rate": point["success_rate"],
+                         "env_steps": self.env_steps, "grid": grid,
                          "actor": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()}}
         return point
 
@@ -392,12 +435,10 @@ class TD3Run:
                 out[k] = self.last_info[k]
         return out
 
-    def best_actor(self) -> tuple[CellActor, np.ndarray]:
-        """The actor snapshot with the best learning-curve return, and its design."""
-        actor = CellActor(N_FEATURES, list(self.t.hidden_sizes))
-        actor.load_state_dict(self.best["actor"])
-        actor.eval()
-        return actor, self.best["grid"]
+    def best_actor(self) -> tuple[torch.nn.Module, np.ndarray]:
+        """The snapshot the final evaluation uses (best success rate on the curve, then best
+        return), and its design."""
+        return actor_from_state(self.spec, self.best["actor"]), self.best["grid"]
 
     # ------------------------------------------------------------------ checkpoint
     def state_dict(self) -> dict:
@@ -408,6 +449,7 @@ class TD3Run:
             "agent": _to_cpu(self.agent.state_dict()), "env": _to_cpu(self.env.state_dict()),
             "buffer": _to_cpu(self.buffer.state_dict()) if keep_buffer else None,
             "gen": self.gen.get_state(), "cpu_gen": self.cpu_gen.get_state(), "rng": self.rng.bit_generator.state,
+            "explore_design": self.explore_design.cpu().clone(),
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -423,6 +465,13 @@ class TD3Run:
         self.gen.set_state(d["gen"])
         self.cpu_gen.set_state(d["cpu_gen"])
         self.rng.bit_generator.state = d["rng"]
+        self.explore_design.copy_(d["explore_design"])
+
+
+def _rank(point: dict) -> tuple[float, float]:
+    """Snapshots are compared by success rate first, then by return (a policy that lands
+    more slews beats one that collects more shaping reward without landing them)."""
+    return point.get("success_rate", 0.0), point["mean_return"]
 
 
 def _to_cpu(x):

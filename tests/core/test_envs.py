@@ -95,6 +95,25 @@ def test_settled_bonus_is_paid_only_below_the_rate_tolerance():
                                                           rel=1e-4)
 
 
+def test_hold_reward_without_in_cone_progress_penalty_and_with_settle_bonus():
+    """A satellite held still on target pays no progress penalty, and earns the settle bonus in full;
+    a moving one inside the cone earns less of it."""
+    reward = {"no_progress_penalty_in_tolerance": False, "settle_bonus": 5.0, "settle_rate_scale_rad_s": 0.05}
+    env = SatelliteSlewEnv(spec={**SHORT, "mission": {**SHORT["mission"], "reward": reward}})
+    env.reset(seed=0, options={"q_TN": [1.0, 0, 0, 0]})
+    _, r_still, *_ = env.step(np.zeros((1, 3), dtype=np.float32))
+    assert r_still == pytest.approx(1.0 + 9.0 + 5.0)  # the paper's reward pays 1 - 1 + 9 here
+    env.reset(seed=0, options={"q_TN": [1.0, 0, 0, 0], "omega_B": [0.02, 0.0, 0.0]})
+    _, r_moving, *_, info = env.step(np.zeros((1, 3), dtype=np.float32))
+    assert info["error_deg"] < 0.25
+    expected = np.exp(-np.radians(info["error_deg"]) / (0.28 * np.pi)) + 9.0 + 5.0 * np.exp(-0.02 / 0.05)
+    assert r_moving == pytest.approx(expected, rel=1e-3) and r_moving < r_still - 1.0
+    # Outside the cone the progress penalty still applies.
+    env.reset(seed=0, options={"q_TN": [np.cos(0.5), np.sin(0.5), 0, 0], "omega_B": [-0.02, 0.0, 0.0]})
+    _, r_away, *_, info = env.step(np.zeros((1, 3), dtype=np.float32))
+    assert info["error_deg"] > 1.0 and r_away < 0.0
+
+
 def test_invalid_design_is_refused():
     with pytest.raises(ValueError, match="no actuator"):
         SatelliteSlewEnv(design=np.ones((3, 3, 3), dtype=int))

@@ -1,32 +1,33 @@
-"""Co-design learns on the `quick` preset: a measured outcome, not a loss.
+"""Co-design learns on a cut-down `quick`: a measured outcome, not a loss.
 
-The trained policy (the `quick` preset as it ships, seed 0, 30k env steps) is compared
-with what it started from, on the final evaluation's 32 seeded slews: the same network
-untrained flying its own design, and 8 random valid designs flown by that untrained
-controller (`modsat_core.baselines.untrained_baselines`).
+The `quick` preset (set network, the CPU recipe), seed 0, with its budget cut to 10k env
+steps so that CI can afford it; its exploration schedules scale with the budget. The
+trained policy is compared, on the final evaluation's 32 seeded slews, with what it started
+from: the same network untrained flying its own design, and 8 random valid designs flown by
+that untrained controller (`modsat_core.baselines.untrained_baselines`). The figures of the
+run are in docs/learning.md ("Status"); the margin asserted, 100 above the best baseline, is
+far outside the spread of the baselines' returns (all within a few of -169, every slew
+breaking the rate limit), so it cannot be reached by a lucky draw of designs.
 
-Measured at commit time (docs/learning.md, "Status"): the baselines average -167.0 (best
-random design -165.2, every slew a rate-limit violation; the untrained network's own design
-is invalid, -170); the trained runs end at +42.1 / -72.9 / -8.8 on seeds 0 / 1 / 2. The
-margin asserted here, 50 above the best baseline, is about 20 times the spread of the
-baselines' returns, so it cannot be reached by a lucky draw of designs.
-
-Success is not asserted: no `quick` run has reached the 1 deg / 0.01 rad/s settle condition
-in its 30k-step budget (docs/learning.md says what it takes), so "trained success > untrained
-success" would fail.
+Success is asserted by tests/learning/test_control_lands.py (the recipe's controller on the
+same mission); no co-design run of 10k steps lands slews yet.
 """
 
 from __future__ import annotations
 
 from modsat_core.baselines import untrained_baselines
 from modsat_core.presets import get_preset
+from modsat_core.spec import parse_spec
 from modsat_core.train import train
 
-MARGIN = 50.0
+MARGIN = 100.0
+STEPS = 10_000
 
 
 def test_codesign_on_quick_beats_the_untrained_policy_and_random_designs():
-    spec = get_preset("quick")
+    d = get_preset("quick").model_dump(mode="json")
+    d["training"].update(total_env_steps=STEPS)
+    spec = parse_spec(d)
     res = train(spec)
     trained = res.summary["policy"]
     base = untrained_baselines(spec, designs=8)

@@ -6,14 +6,15 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 import torch
 
 from modsat_core.evaluate import episode_rngs
 from modsat_core.mission import draw_episode
 from modsat_core.policy import PolicyController, export_torchscript
 from modsat_core.slew import Design, SlewSim
-from modsat_core.td3 import CellActor
 from modsat_core.features import N_FEATURES
+from modsat_core.networks import NETWORKS, make_actor
 
 from .conftest import tiny_spec
 
@@ -27,12 +28,13 @@ assert "modsat_core" not in sys.modules
 """
 
 
-def test_export_matches_in_process_policy(tmp_path):
+@pytest.mark.parametrize("network", NETWORKS)
+def test_export_matches_in_process_policy(tmp_path, network):
     spec = tiny_spec(design={"grid_size": 3})
     grid = np.ones((3, 3, 3), dtype=np.int64)
     grid[0, 1, 1] = grid[1, 1, 1] = grid[2, 0, 2] = 2
     torch.manual_seed(0)
-    actor = CellActor(N_FEATURES, [32, 32]).eval()
+    actor = make_actor(network, N_FEATURES, [32, 32]).eval()
     # A state with rates and wheel momentum: fly a few random steps first.
     sim = SlewSim.from_designs([Design.from_grid(grid, spec.modules)] * 16, spec.mission, spec.modules)
     sim.reset(list(range(16)), [draw_episode(r, spec.mission) for r in episode_rngs(1, 16)])

@@ -5,9 +5,11 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import torch
 
 from modsat_core.morphology import is_valid
+from modsat_core.networks import NETWORKS
 from modsat_core.train import (
     checkpoint_from_bytes, checkpoint_to_bytes, load_policy, replay_buffer_bytes, replay_fields, train,
 )
@@ -19,9 +21,10 @@ EXPECTED = {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.j
             "policy.pt"}
 
 
-def test_run_writes_every_output():
+@pytest.mark.parametrize("network", NETWORKS)
+def test_run_writes_every_output(network):
     progress = []
-    result = train(tiny_spec(), on_progress=progress.append)
+    result = train(tiny_spec(training__network=network), on_progress=progress.append)
     files = result.artifacts()
     assert not result.stopped and result.env_steps == 480
     assert EXPECTED <= set(files)
@@ -32,7 +35,8 @@ def test_run_writes_every_output():
     assert ev["policy"]["summary"]["episodes"] == 3
     design = json.loads(files["design.json"])
     actor, grid, spec = load_policy(files["policy.pt"])
-    assert np.array_equal(grid, np.asarray(design["grid"])) and spec == tiny_spec()
+    assert np.array_equal(grid, np.asarray(design["grid"])) and spec == tiny_spec(training__network=network)
+    assert type(actor).__name__ == {"per-module": "CellActor", "set": "SetActor"}[network]
     if design["valid"]:
         assert is_valid(grid) and "policy_export.pt" in files
         assert ev["pd_baseline"]["summary"]["episodes"] == 3
@@ -50,16 +54,21 @@ def test_budget_is_never_exceeded():
     assert r.env_steps == 0 and len(r.curve) == 1 and "policy.pt" in r.artifacts()
 
 
-def test_same_seed_same_curve_on_cpu():
-    a = train(tiny_spec()).curve
-    b = train(tiny_spec()).curve
+@pytest.mark.parametrize("network", NETWORKS)
+def test_same_seed_same_curve_on_cpu(network):
+    # Repaired designs fly, so that the curves carry returns that depend on the seed.
+    a = train(tiny_spec(training__network=network, design__repair=True)).curve
+    b = train(tiny_spec(training__network=network, design__repair=True)).curve
     assert a == b
-    c = train(tiny_spec(seed=4)).curve
+    c = train(tiny_spec(seed=4, training__network=network, design__repair=True)).curve
     assert c != a
 
 
-def test_stop_and_resume_continues_from_the_checkpoint():
-    full = train(tiny_spec())
+@pytest.mark.parametrize("network,explored", [(n, 1.0) for n in NETWORKS] + [("set", 0.5)])
+def test_stop_and_resume_continues_from_the_checkpoint(network, explored):
+    spec = tiny_spec(training__network=network, training__design_exploration_episodes=explored,
+                     training__exploration_noise_final=0.0, training__design_exploration_final=0.0)
+    full = train(spec)
     ckpts: list[bytes] = []
     seen = []
 
@@ -73,13 +82,13 @@ def test_stop_and_resume_continues_from_the_checkpoint():
         if p["env_steps"] >= 200:
             seen.append(p["env_steps"])
 
-    first = train(tiny_spec(), on_progress=on_progress, on_checkpoint=on_ckpt, should_stop=should_stop)
+    first = train(spec, on_progress=on_progress, on_checkpoint=on_ckpt, should_stop=should_stop)
     assert first.stopped and first.artifacts() == {}
     ck = checkpoint_from_bytes(ckpts[-1])
     saved = ck["env_steps"]
     assert 160 <= saved < 480
     resumed_progress = []
-    second = train(tiny_spec(), checkpoint=ck, on_progress=resumed_progress.append)
+    second = train(spec, checkpoint=ck, on_progress=resumed_progress.append)
     assert not second.stopped and second.env_steps == 480
     assert min(p["env_steps"] for p in resumed_progress) > saved  # never goes back past the checkpoint
     # Everything (networks, optimisers, buffer, simulator, RNGs) was saved: the resumed run
@@ -105,3 +114,36 @@ def test_replay_buffer_of_5x5x5_for_5e5_transitions_is_under_2_GB():
     assert small.nbytes == replay_buffer_bytes(5, 100)
     assert all(t.dtype in (torch.uint8, torch.int16, torch.float16, torch.float32, torch.bool)
                for t in small.data.values())
+
+
+def test_a_policy_file_from_before_the_network_choice_is_refused_with_a_reason():
+    import io
+
+    files = train(tiny_spec(training__total_env_steps=5)).artifacts()
+    d = torch.load(io.BytesIO(files["policy.pt"]), weights_only=False)
+    assert d["version"] == 2 and d["network"] == "per-module"
+    old = {k: v for k, v in d.items() if k != "network"} | {"version": 1, "n_features": 47}
+    buf = io.BytesIO()
+    torch.save(old, buf)
+    with pytest.raises(ValueError, match="older modsat.*train the run again"):
+        load_policy(buf.getvalue())
+
+
+def test_unexplored_episodes_grow_the_policy_s_own_design():
+    """`design_exploration_episodes`: an episode drawn as unexplored grows exactly the design
+    the deterministic actor grows (no swaps, no noise); explored ones differ."""
+    from modsat_core.policy import design_with
+    from modsat_core.train import TD3Run
+
+    def grown(share: float) -> tuple[list, np.ndarray]:
+        spec = tiny_spec(training__learning_starts=0, training__design_exploration=0.5,
+                         training__design_exploration_episodes=share, design__repair=True)
+        run = TD3Run(spec)
+        for _ in range(spec.design.design_steps):
+            run.env.step(run._act(run.env.observe()))
+        return [g for g in run.env.grids.numpy()], design_with(run.agent.actor, spec)
+
+    grids, own = grown(0.0)
+    assert all(np.array_equal(g, own) for g in grids)
+    grids, own = grown(1.0)
+    assert sum(not np.array_equal(g, own) for g in grids) >= len(grids) // 2
