@@ -9,7 +9,9 @@ Layout of one satellite under ``prefix`` (e.g. ``/A``)::
 
     prefix                 placement (side-by-side offset), not rotated
     prefix/body            frame, wxyz = q_BN, with the body axes (x red, y green, z blue)
-    prefix/body/voxels     one batched mesh: structure grey, actuators orange
+    prefix/body/voxels     one batched mesh: the actuators, orange
+    prefix/body/structure  one batched mesh: the structure modules, grey at opacity 0.2
+                           (an actuator inside the satellite stays visible)
     prefix/body/edges      cube edges (line segments)
     prefix/target          frame, wxyz = q_TN: the target attitude
     prefix/target/ghost    the same voxels at opacity 0.2
@@ -22,11 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from modsat_core.spec import EMPTY
+from modsat_core.spec import ACTUATOR, EMPTY
 
 #: sRGB colours (0-255). The actuator colour is what the browser tests look for.
 STRUCTURE_SRGB = (150, 150, 150)
 ACTUATOR_SRGB = (255, 127, 14)  # #ff7f0e
+#: Structure modules are drawn translucent so that enclosed actuators show.
+STRUCTURE_OPACITY = 0.2
 EDGE_SRGB = (35, 35, 35)
 GHOST_OPACITY = 0.2
 
@@ -119,15 +123,24 @@ def draw_satellite(scene, prefix: str, grid, *, position=(0.0, 0.0, 0.0), label:
         M = len(vox.positions)
         ident = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (M, 1))
         colors = vox.colors_linear.astype(np.float32)
-        scene.add_batched_meshes_simple(f"{prefix}/body/voxels", CUBE_VERTICES, CUBE_FACES, ident, vox.positions,
-                                        batched_colors=colors, flat_shading=True)
+        # Actuators opaque, structure translucent: a wheel unit inside the satellite (the
+        # designs that fly best put the one actuator at the centre) stays visible.
+        act = vox.types == ACTUATOR
+        for name, sel, opacity in (("voxels", act, None), ("structure", ~act, STRUCTURE_OPACITY)):
+            if sel.any():
+                scene.add_batched_meshes_simple(f"{prefix}/body/{name}", CUBE_VERTICES, CUBE_FACES, ident[sel],
+                                                vox.positions[sel], batched_colors=colors[sel], flat_shading=True,
+                                                opacity=opacity)
+            else:
+                scene.remove_by_name(f"{prefix}/body/{name}")
         scene.add_line_segments(f"{prefix}/body/edges", vox.edge_segments(), srgb_to_linear(EDGE_SRGB),
                                 thickness=0.035)
         scene.add_batched_meshes_simple(f"{prefix}/target/ghost", CUBE_VERTICES * 1.02, CUBE_FACES, ident,
                                         vox.positions, batched_colors=colors, flat_shading=True,
                                         opacity=GHOST_OPACITY, cast_shadow=False, receive_shadow=False)
     else:  # an empty design: nothing to draw but its name
-        for name in (f"{prefix}/body/voxels", f"{prefix}/body/edges", f"{prefix}/target/ghost"):
+        for name in (f"{prefix}/body/voxels", f"{prefix}/body/structure", f"{prefix}/body/edges",
+                     f"{prefix}/target/ghost"):
             scene.remove_by_name(name)
     if label:
         scene.add_label(f"{prefix}/label", label, position=(0.0, 0.0, r + 0.6), anchor="bottom-center",

@@ -20,7 +20,7 @@ def test_submit_preset_returns_201_with_location(api):
     assert r.headers["location"] == f"/api/jobs/{job['id']}"
     assert job["status"] == "queued" and job["name"] == "quick"
     assert job["spec"]["training"]["total_env_steps"] == 400
-    assert job["spec"]["training"]["hidden_sizes"] == [64, 64], "the rest comes from the preset"
+    assert job["spec"]["training"]["hidden_sizes"] == [256, 256], "the rest comes from the preset"
     assert job["progress"] == {"env_steps": 0, "total_env_steps": 400, "fraction": 0.0, "phase": None,
                                "checkpoint_env_steps": None, "run_seconds": 0.0}
     again = api.client.get(r.headers["location"]).json()

@@ -23,6 +23,11 @@ TINY_GA = {"preset": "quick", "overrides": {
                  "batch_size": 32, "hidden_sizes": [32, 32]},
     "evaluation": {"episodes": 4, "trajectories": 2}}}
 
+#: Orange pixels that show an actuator. The RL run's design is the full cube with the one
+#: actuator at its centre, seen through the translucent structure (362 pixels measured at
+#: structure opacity 0.3, more at the shipped 0.2); drawn opaque, the structure hid it (4).
+MIN_ACTUATOR_PIXELS = 150
+
 RUN: dict[str, int] = {}  # what the first test made, for the ones after it
 
 
@@ -119,7 +124,7 @@ def test_open_the_3d_view_and_go_mid_slew(service, new_page):
     frame = _open_3d(page)
     frame.get_by_text(f"job {RUN['rl']} rl-ci").first.wait_for()  # the job the page asked for
     png = _scene_shot(frame, shots / "satellite-3d.png")
-    assert actuator_pixels(png) > 2000, "the actuator modules are drawn in their colour"
+    assert actuator_pixels(png) > MIN_ACTUATOR_PIXELS, "the actuator modules are drawn in their colour"
 
     # The PD baseline flies the full slew on the same design: go to 1.5 s into it.
     frame.get_by_role("combobox", name="Controller").click()
@@ -134,7 +139,7 @@ def test_open_the_3d_view_and_go_mid_slew(service, new_page):
     assert 2.0 < err < 80.0, f"mid-slew: the error is neither the start's nor zero ({text})"
     time.sleep(1.5)
     png = _scene_shot(frame, shots / "satellite-mid-slew.png")
-    assert actuator_pixels(png) > 2000
+    assert actuator_pixels(png) > MIN_ACTUATOR_PIXELS
     page.locator("#view-box").screenshot(path=str(shots / "satellite-mid-slew-page.png"))
 
 
@@ -153,7 +158,7 @@ def test_rl_and_ga_side_by_side(service, new_page):
     frame.get_by_text(re.compile(r"RL \(job \d+ rl-ci\) vs GA \(job \d+ ga-ci\)")).first.wait_for()
     png = _scene_shot(frame, shots / "rl-vs-ga.png")
     left, right = actuator_pixels(png, (0.0, 0.0, 0.5, 1.0)), actuator_pixels(png, (0.5, 0.0, 1.0, 1.0))
-    assert left > 500 and right > 500, f"two satellites, one each side (orange pixels {left}, {right})"
+    assert left > MIN_ACTUATOR_PIXELS and right > MIN_ACTUATOR_PIXELS, f"two satellites, one each side (orange pixels {left}, {right})"
     page.screenshot(path=str(shots / "rl-vs-ga-page.png"))
     assert f"compare={RUN['ga']}" in page.url
 
@@ -174,7 +179,7 @@ def test_recording_plays_without_a_python_viewer(service, new_page, tmp_path):
         close_webgl_notice(page)
         time.sleep(3.5)
         png = _scene_shot(page, shots / "recording-playback.png")
-        assert actuator_pixels(png) > 2000, "the recording shows the satellite"
+        assert actuator_pixels(png) > MIN_ACTUATOR_PIXELS, "the recording shows the satellite"
 
         # The same from the web page (the Recording button), live viewer off.
         page2 = new_page()
@@ -186,6 +191,6 @@ def test_recording_plays_without_a_python_viewer(service, new_page, tmp_path):
         frame.locator("canvas").first.wait_for(state="attached")
         close_webgl_notice(frame)
         time.sleep(3.5)
-        assert actuator_pixels(_scene_shot(frame, shots / "recording-in-page.png")) > 2000
+        assert actuator_pixels(_scene_shot(frame, shots / "recording-in-page.png")) > MIN_ACTUATOR_PIXELS
     finally:
         quiet.stop()
