@@ -63,7 +63,8 @@ PRESETS: dict[str, JobSpec] = {
     "paper-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "td3-codesign"),
     "ga-3x3x3": _paper(3, PAPER_TAU_3X3X3_NM, "ga"),
     "ga-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "ga"),
-    # A demo on one core in about 10 minutes: short episodes (120 steps), 30-90 deg slews, 1 deg.
+    # The demo mission: short episodes (120 steps), 30-90 deg slews, 1 deg. Aimed at 10 minutes on one
+    # core; measured 22 minutes with two other jobs on a 2-core machine (docs/benchmarks.md).
     "quick": JobSpec.model_validate({
         "name": "quick",
         "algorithm": "td3-codesign",
