@@ -20,6 +20,10 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Per-cell rows one `bench update` batch may hold (256 x 1,000: batch 256 on 10x10x10).
+MAX_BENCH_CELL_ROWS = 256_000
+
+
 def _cmd_bench_update(args: argparse.Namespace) -> int:
     from .bench_update import bench_update
 
@@ -27,6 +31,11 @@ def _cmd_bench_update(args: argparse.Namespace) -> int:
             and all(4 <= h <= 2048 for h in args.hidden) and len(args.hidden) <= 4):
         raise SystemExit("modsat bench update: --rounds must be 1 to 100, --batch-size 1 to 65,536, --grids between "
                          "2 and 10, --hidden at most 4 sizes of 4 to 2,048")
+    if args.batch_size * max(args.grids) ** 3 > MAX_BENCH_CELL_ROWS:
+        # The per-module network holds batch x N^3 rows of every layer's activations.
+        raise SystemExit(f"modsat bench update: --batch-size x N^3 of the largest grid must be at most "
+                         f"{MAX_BENCH_CELL_ROWS:,} (the per-module network's rows per layer); got "
+                         f"{args.batch_size * max(args.grids) ** 3:,}")
     report = bench_update(grids=tuple(args.grids), hidden=tuple(args.hidden), batch=args.batch_size,
                           rounds=args.rounds)
     if args.json:

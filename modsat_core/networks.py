@@ -30,14 +30,11 @@ can compile it, which the standalone export uses) and ``forward(obs: CellObs)``.
 
 from __future__ import annotations
 
-from typing import Literal
-
 import torch
 from torch import Tensor, nn
 
 from .features import CellObs
 
-NetworkName = Literal["per-module", "set"]
 NETWORKS: tuple[str, ...] = ("per-module", "set")
 #: Width of the set network's per-cell encoder and heads.
 SET_CELL_WIDTH = 32

@@ -148,9 +148,7 @@ def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpe
                          f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features): "
                          "train the run again")
     spec = JobSpec.model_validate(d["spec"])
-    actor = make_actor(d["network"], d["n_features"], d["hidden_sizes"])
-    actor.load_state_dict(d["actor"])
-    actor.eval()
+    actor = actor_from_state(spec, d["actor"])
     grid = None if d["grid"] is None else np.asarray(d["grid"], dtype=np.int64)
     return actor, grid, spec
 
@@ -288,9 +286,8 @@ class TD3Run:
         self.fixed_grid = None if fixed_grid is None else np.asarray(fixed_grid, dtype=np.int64)
         self.env = CoDesignEnv(spec, self.t.num_envs, seed=spec.seed, fixed_grid=self.fixed_grid, device=device)
         torch.manual_seed(spec.seed)
-        hidden = list(self.t.hidden_sizes)
-        actor = make_actor(self.t.network, N_FEATURES, hidden).to(device)
-        critic = make_critic(self.t.network, N_FEATURES, hidden).to(device)
+        actor = new_actor(spec).to(device)
+        critic = make_critic(self.t.network, N_FEATURES, list(self.t.hidden_sizes)).to(device)
         self.agent = TD3(actor, critic, TD3Config(
             gamma=self.t.gamma, tau=self.t.tau, policy_noise=self.t.policy_noise, noise_clip=self.t.noise_clip,
             policy_delay=self.t.policy_delay, actor_lr=self.t.actor_lr, critic_lr=self.t.critic_lr))
@@ -312,8 +309,12 @@ class TD3Run:
     # ------------------------------------------------------------------ acting
     def _act(self, obs: CellObs) -> torch.Tensor:
         B, C = obs.x.shape[0], obs.x.shape[1]
-        with torch.no_grad():
-            a = self.agent.actor(obs)
+        warm_up = self.env_steps < self.t.learning_starts
+        if warm_up and not bool(obs.design.any()):
+            a = torch.zeros((B, C, 3), device=self.device)  # every row flies: replaced by random torques below
+        else:
+            with torch.no_grad():
+                a = self.agent.actor(obs)
         noise = torch.randn(a.shape, generator=self.gen, device=self.device) * self.t.noise_at(self.env_steps)
         explore = self._explored_designs(obs)
         # Designing rows of an episode whose design is not explored grow the policy's own design.
@@ -325,7 +326,7 @@ class TD3Run:
             swap &= (obs.design & explore).reshape(B, 1, 1)
             rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
             a = torch.where(swap, rand, a)
-        if self.env_steps < self.t.learning_starts:
+        if warm_up:
             # Before learning starts the flights are flown with uniformly random torques, on the
             # designs the (untrained) policy grows: random designs there (the paper's uniform
             # random actions in both phases) are mostly unflyable, and left the critic with

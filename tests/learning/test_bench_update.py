@@ -29,3 +29,5 @@ def test_cli_prints_json_and_rejects_bad_sizes(capsys):
     assert set(out["results"]["2x2x2"]) >= {"flat_ms", "per-module_ms", "set_ms", "set_ratio", "per-module_ratio"}
     with pytest.raises(SystemExit, match="--grids between"):
         main(["bench", "update", "--grids", "11"])
+    with pytest.raises(SystemExit, match="at most 256,000"):  # would hold 65,536,000 cell rows per layer
+        main(["bench", "update", "--grids", "10", "--batch-size", "65536"])
