@@ -25,7 +25,7 @@ TINY_GA = {"preset": "quick", "overrides": {
 
 #: Orange pixels that show an actuator. The RL run's design is the full cube with the one
 #: actuator at its centre, seen through the translucent structure (362 pixels measured at
-#: structure opacity 0.3, more at the shipped 0.2); drawn opaque, the structure hid it (4).
+#: structure opacity 0.3; the shipped opacity is 0.2); drawn opaque, the structure hid it (4).
 MIN_ACTUATOR_PIXELS = 150
 
 RUN: dict[str, int] = {}  # what the first test made, for the ones after it
