@@ -50,6 +50,7 @@ def _cmd_bench_update(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_learning(args: argparse.Namespace) -> int:
+    _set_threads(None)
     from .bench_learning import bench_learn, bench_rl_vs_ga
 
     import os
@@ -68,6 +69,7 @@ def _cmd_bench_learning(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench_control(args: argparse.Namespace) -> int:
+    _set_threads(None)
     from .bench_control import bench_control
 
     import errno
@@ -125,13 +127,57 @@ def _cmd_schema(args: argparse.Namespace) -> int:
     return 0
 
 
+def _limits():
+    """The per-job limits of the MODSAT_* settings (the service's; docs/service.md, "Limits")."""
+    from pydantic import ValidationError
+
+    from worker.settings import WorkerSettings
+
+    try:
+        return WorkerSettings().limits()
+    except ValidationError as exc:
+        raise SystemExit(f"modsat: bad MODSAT_* setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}"
+                         ) from None
+
+
+def _check_limits(spec, command: str) -> None:
+    from .limits import check
+
+    problems = check(spec, _limits())
+    if problems:
+        print(f"modsat {command}: this spec is over the limits (raise them with the MODSAT_* variables named if "
+              "this machine can take it):\n  " + "\n  ".join(m for _, m in problems), file=sys.stderr)
+        raise SystemExit(2)
+
+
 def _cmd_check(args: argparse.Namespace) -> int:
+    from .limits import estimate
     from .spec import parse_spec
 
     with open(args.spec, "rb") as fh:
         spec = parse_spec(fh.read())
-    print(f"ok: {spec.algorithm}, {spec.design.grid_size}^3 grid, {spec.training.total_env_steps:,} env steps")
+    _check_limits(spec, "check")
+    est = estimate(spec)
+    print(f"ok: {spec.algorithm}, {spec.design.grid_size}^3 grid, {spec.training.total_env_steps:,} env steps, "
+          f"about {est.memory_bytes / 2**30:.1f} GiB of memory (replay buffer {est.replay_bytes / 2**30:.2f} GiB)")
     return 0
+
+
+def _set_threads(n: int | None) -> None:
+    """Torch threads of this process: ``--threads``, else MODSAT_TORCH_THREADS, else 1 (on a busy
+    machine torch's default of one per core measured about 20x slower)."""
+    import os
+
+    if n is None:
+        raw = os.environ.get("MODSAT_TORCH_THREADS", "").strip() or "1"
+        if not raw.isdigit() or not 1 <= int(raw) <= 256:
+            raise SystemExit(f"modsat: MODSAT_TORCH_THREADS must be a number from 1 to 256; got {raw!r}")
+        n = int(raw)
+    if not 1 <= n <= 256:
+        raise SystemExit(f"modsat: --threads must be from 1 to 256; got {n}")
+    import torch
+
+    torch.set_num_threads(n)
 
 
 def _load_spec(args: argparse.Namespace):
@@ -199,6 +245,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .train import checkpoint_from_bytes, checkpoint_to_bytes, train
 
     spec = _load_spec(args)
+    _check_limits(spec, "train")
+    _set_threads(args.threads)
     out = args.out
     os.makedirs(out, exist_ok=True)
     ckpt_path = os.path.join(out, "checkpoint.pt")
@@ -266,6 +314,7 @@ def _print_evaluation(summary: dict, stream) -> None:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
+    _set_threads(None)
     import os
 
     from .train import final_evaluation, load_policy
@@ -359,6 +408,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, help="override the seed")
     tr.add_argument("--device", choices=["auto", "cpu", "cuda"], help="override training.device")
     tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt (after Ctrl-C)")
+    tr.add_argument("--threads", type=int,
+                    help="torch threads (default: MODSAT_TORCH_THREADS, else 1; one per training process is fastest "
+                    "on a busy machine)")
     tr.set_defaults(func=_cmd_train)
 
     ev = sub.add_parser("eval", help="Monte-Carlo evaluation of a trained run (policy and PD baseline)")
@@ -366,6 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--episodes", type=int, help="number of seeded slews (default: the spec's)")
     ev.add_argument("--json", action="store_true")
     ev.set_defaults(func=_cmd_eval)
+
 
     _add_service_commands(sub)
     return p
@@ -390,6 +443,12 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return args.func(args)
+    except BrokenPipeError:  # e.g. `modsat presets quick | head`: the reader left; say nothing
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
+        return 141
     except SpecError as exc:
         print(f"modsat: {exc}", file=sys.stderr)
         return 2

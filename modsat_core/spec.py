@@ -10,6 +10,7 @@ Units are SI and are part of the field names where they matter (``_deg``, ``_Nm`
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Annotated, Any, Literal
 
@@ -294,6 +295,15 @@ class Training(_Section):
         frac = min(max((env_steps - self.learning_starts) / span, 0.0), 1.0)
         return start + frac * (final - start)
 
+    @field_validator("buffer_size")
+    @classmethod
+    def _check_batch(cls, v: int, info: Any) -> int:
+        batch = info.data.get("batch_size")
+        if batch is not None and batch > v:
+            raise ValueError(f"buffer_size ({v}) must be at least batch_size ({batch}): an update samples "
+                             f"batch_size transitions from the buffer")
+        return v
+
     def noise_at(self, env_steps: int) -> float:
         """The exploration noise std after ``env_steps`` steps (see `exploration_noise_final`)."""
         return self._schedule(self.exploration_noise, self.exploration_noise_final, env_steps)
@@ -348,6 +358,11 @@ class JobSpec(_Section):
         if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
             raise ValueError("modules.momentum_capacity_Nms is only meaningful with actuator_model 'reaction-wheel'")
         return self
+
+
+class UnrunnableSpec(ValueError):
+    """A valid spec that cannot run where it was sent (e.g. ``device: cuda`` without a GPU).
+    Retrying cannot help: a worker fails the job at once."""
 
 
 class SpecError(ValueError):
@@ -430,8 +445,14 @@ def format_errors(exc: ValidationError) -> list[str]:
 def parse_spec(data: dict[str, Any] | str | bytes) -> JobSpec:
     """Validate a spec given as a dict or JSON text; raise :class:`SpecError` with readable messages."""
     try:
-        if isinstance(data, (str, bytes)):
-            return JobSpec.model_validate_json(data)
-        return JobSpec.model_validate(data)
+        if not isinstance(data, (str, bytes)):
+            try:
+                data = json.dumps(data, allow_nan=False)
+            except ValueError:
+                raise SpecError(["(spec): NaN and infinite numbers are not allowed"]) from None
+            except TypeError as exc:
+                raise SpecError([f"(spec): not a JSON document: {exc}"]) from None
+        # Strict: "3" is not the integer 3 and true is not 1 (JSON numbers are still floats).
+        return JobSpec.model_validate_json(data, strict=True)
     except ValidationError as exc:
         raise SpecError(format_errors(exc), exc.errors(include_url=False)) from None

@@ -30,7 +30,7 @@ from .networks import finish, make_actor, make_critic
 from .pd import PDController
 from .policy import PolicyController, design_with, export_torchscript
 from .slew import Design
-from .spec import JobSpec
+from .spec import JobSpec, UnrunnableSpec
 from .td3 import TD3, ReplayBuffer, TD3Config
 
 ProgressFn = Callable[[dict], None]
@@ -51,7 +51,8 @@ def resolve_device(name: str) -> str:
     if name == "auto":
         return "cuda" if torch.cuda.is_available() else "cpu"
     if name == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError("training.device is 'cuda' but torch sees no GPU")
+        raise UnrunnableSpec("training.device is 'cuda' but torch sees no GPU on this machine; "
+                             "use 'auto' or 'cpu'")
     return name
 
 

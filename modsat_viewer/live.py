@@ -11,6 +11,7 @@ websocket URL (the web page embeds viser's client with
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import threading
@@ -22,6 +23,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
+from .origin import host_allowed, host_names, origin_allowed
 from .run import CONTROLLERS, Episode, RunData, sample_period
 from .scene import draw_satellite, lay_out
 
@@ -325,10 +327,13 @@ class ViewerApp:
     """A viser server with one :class:`Session` per browser tab. Runs in viser's threads."""
 
     def __init__(self, source: RunSource, *, host: str = "127.0.0.1", port: int = 8080,
-                 label: str = "modsat viewer", cache_size: int = 8):
+                 label: str = "modsat viewer", cache_size: int = 8, allowed_hosts: set[str] | None | str = ""):
+        """``allowed_hosts``: the host names the websocket answers to, and whose pages may open
+        it (origin.py); a string = extra names next to the loopback ones and ``host``."""
         import viser
 
         self.source = source
+        self.host_names = host_names(host, allowed_hosts) if isinstance(allowed_hosts, str) else allowed_hosts
         self.server = viser.ViserServer(host=host, port=port, label=label)
         self.server.scene.set_up_direction("+z")
         self.sessions: dict[int, Session] = {}
@@ -358,16 +363,40 @@ class ViewerApp:
                 self._cache.popitem(last=False)
         return run
 
-    def _query(self, client) -> dict[str, str]:
-        """The query string of the tab's websocket URL (viser keeps the connection's request)."""
+    def _connection(self, client):
+        """viser's websocket connection of a tab (viser keeps the handshake request), or None."""
         try:
-            conn = self.server._websock_server._live_connections.get(client.client_id)  # noqa: SLF001 - viser 1.1.1
-            path = conn.request.path if conn is not None and conn.request is not None else ""
+            return self.server._websock_server._live_connections.get(client.client_id)  # noqa: SLF001 - viser 1.1.1
         except AttributeError:
-            path = ""
+            return None
+
+    def _query(self, client) -> dict[str, str]:
+        """The query string of the tab's websocket URL."""
+        conn = self._connection(client)
+        path = conn.request.path if conn is not None and conn.request is not None else ""
         return {k: v[-1] for k, v in parse_qs(urlsplit(path).query).items()}
 
+    def _refused(self, client) -> str | None:
+        """Why a tab may not connect: a foreign Host (DNS rebinding) or a page of another site."""
+        conn = self._connection(client)
+        if conn is None or conn.request is None:
+            return "no handshake to check"
+        headers = conn.request.headers
+        if not host_allowed(headers.get("Host"), self.host_names):
+            return f"host {headers.get('Host')!r} is not one this viewer answers to"
+        if not origin_allowed(headers.get("Origin"), self.host_names):
+            return f"a page of another site ({headers.get('Origin')!r})"
+        return None
+
     def _connect(self, client) -> None:
+        why = self._refused(client)
+        if why is not None:
+            log.warning("viewer: refused a websocket: %s", why)
+            conn = self._connection(client)
+            loop = getattr(self.server._websock_server, "_background_event_loop", None)  # noqa: SLF001 - viser 1.1.1
+            if conn is not None and loop is not None:  # plain callbacks run on viser's thread pool
+                asyncio.run_coroutine_threadsafe(conn.close(1008, "refused: " + why[:100]), loop)
+            return
         try:
             self.sessions[client.client_id] = Session(self, client, self._query(client))
         except Exception:  # noqa: BLE001 - a broken run must not take the viewer down

@@ -18,6 +18,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
 from sqlalchemy.exc import OperationalError, SQLAlchemyError
+from sqlalchemy.exc import TimeoutError as SQLAlchemyTimeoutError
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import modsat_core
@@ -28,6 +29,7 @@ from worker.store import JobStore
 from .deps import StoreDep
 from .routes_jobs import router as jobs_router
 from .schemas import Health, PresetInfo, PresetSubmission
+from .security import CrossSiteGuard
 from .settings import ServerSettings
 from .viewer import mount_static, start_viewer, viewer_router
 
@@ -107,6 +109,12 @@ def _install_error_handlers(app: FastAPI) -> None:
         return JSONResponse({"detail": "the job database is unavailable; try again shortly"}, status_code=503,
                             headers={"Retry-After": "5"})
 
+    @app.exception_handler(SQLAlchemyTimeoutError)
+    async def _pool_full(_request: Request, exc: SQLAlchemyTimeoutError) -> JSONResponse:
+        log.error("no database connection free: %s", exc)
+        return JSONResponse({"detail": "the service is busy (no database connection free); try again shortly"},
+                            status_code=503, headers={"Retry-After": "5"})
+
     @app.exception_handler(SQLAlchemyError)
     async def _db_error(_request: Request, exc: SQLAlchemyError) -> JSONResponse:
         log.exception("database error", exc_info=exc)
@@ -146,7 +154,18 @@ def _misc_router() -> APIRouter:
     return r
 
 
-def _openapi(app: FastAPI):
+def _api_not_found() -> APIRouter:
+    """Unknown paths under /api get a JSON 404 (not the web UI's static 404), whatever the method."""
+    r = APIRouter(prefix="/api", include_in_schema=False)
+
+    @r.api_route("/{path:path}", methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE"])
+    def unknown(path: str) -> JSONResponse:
+        return JSONResponse({"detail": f"no API endpoint /api/{path[:200]}; see /api/docs"}, status_code=404)
+
+    return r
+
+
+def _openapi(app: FastAPI, token: bool):
     """The generated schema, plus JobSpec (the submit body is read by hand, so FastAPI does not see it)."""
 
     def build() -> dict[str, Any]:
@@ -158,6 +177,13 @@ def _openapi(app: FastAPI):
         comps.update(spec_schema.pop("$defs", {}))
         comps["JobSpec"] = spec_schema
         comps["PresetSubmission"] = PresetSubmission.model_json_schema(ref_template="#/components/schemas/{model}")
+        if not token:  # an open server: no operation needs the bearer token, so none declares it
+            schema["components"].pop("securitySchemes", None)
+            for ops in schema.get("paths", {}).values():
+                for op in ops.values():
+                    if isinstance(op, dict):
+                        op.pop("security", None)
+                        op.get("responses", {}).pop("401", None)
         app.openapi_schema = schema
         return schema
 
@@ -200,8 +226,11 @@ def create_app(settings: ServerSettings | None = None, store: JobStore | None = 
     app.include_router(jobs_router)
     app.include_router(_misc_router())
     app.include_router(viewer_router())
+    app.include_router(_api_not_found())
     mount_static(app, settings)
 
-    app.openapi = _openapi(app)
+    app.openapi = _openapi(app, token=settings.api_token is not None)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    # Outermost: a request from another site is refused before its body is read.
+    app.add_middleware(CrossSiteGuard, host_names=settings.host_names(), origins=settings.origin_list())
     return app

@@ -69,6 +69,27 @@ def _stop_workers(procs: list[subprocess.Popen], grace_s: float) -> None:
             p.wait()
 
 
+def _port_in_use(host: str, port: int) -> str | None:
+    """Why (host, port) cannot be listened on, or None: checked before the workers and the
+    viewer start, so that a second `modsat serve` stops with one clear line."""
+    import socket
+
+    if port == 0:
+        return None
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        return str(exc)
+    family, kind, proto, _, addr = infos[0]
+    with socket.socket(family, kind, proto) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
+        try:
+            sock.bind(addr)
+        except OSError as exc:
+            return exc.strerror or str(exc)
+    return None
+
+
 def _cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
@@ -87,6 +108,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     except ValidationError as exc:
         print(f"modsat serve: invalid setting: {exc}", file=sys.stderr)
         return 2
+    busy = _port_in_use(settings.host, settings.port)
+    if busy:
+        print(f"modsat serve: cannot listen on {settings.host}:{settings.port}: {busy} (is another `modsat serve` "
+              "running?); choose another port with --port", file=sys.stderr)
+        return 1
     url = settings.resolved_db_url
     try:
         store = JobStore(url, busy_timeout_s=settings.sqlite_busy_timeout_s)
@@ -107,6 +133,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     print(f"modsat: API        {base}/api  (OpenAPI: {base}/api/openapi.json)", flush=True)
     print(f"modsat: web UI     {base}/", flush=True)
     print(f"modsat: {args.workers} local worker(s); add more anywhere with: modsat worker --db URL", flush=True)
+    if settings.host in ("0.0.0.0", "::") and not settings.allowed_hosts:
+        print("modsat: listening on every interface, but answering only to localhost names: set "
+              "MODSAT_ALLOWED_HOSTS to the names or addresses others use to reach this machine", flush=True)
 
     env = dict(os.environ, MODSAT_RUNNER=settings.runner)
     procs = [
@@ -159,7 +188,8 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if not 0 <= args.port <= 65535:
         print("modsat view: --port must be between 0 and 65535", file=sys.stderr)
         return 2
-    app = ViewerApp(source, host=args.host, port=args.port, label="modsat view")
+    app = ViewerApp(source, host=args.host, port=args.port, label="modsat view",
+                    allowed_hosts=os.environ.get("MODSAT_ALLOWED_HOSTS", ""))
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     names = " vs ".join(Path(p).name for p in args.run_dirs[:2])
     print(f"modsat view: {names} at http://{shown}:{app.port}/  (Ctrl-C to stop)", flush=True)

@@ -13,6 +13,7 @@ from fastapi import APIRouter, Header, HTTPException, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
+from modsat_core.limits import check as check_limits
 from worker.db import TERMINAL_STATUSES
 
 from .deps import SettingsDep, StoreDep, WriteAccess
@@ -64,13 +65,30 @@ def _detail(store, job_id: int) -> JobDetail | None:
                                             413: {"description": "Body too large"},
                                             422: {"description": "Invalid spec; `messages` name each field"}})
 async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
-    """Queue a training run. The body is a JobSpec, or `{"preset": NAME, "overrides": {...}}`."""
+    """Queue a training run. The body is a JobSpec, or `{"preset": NAME, "overrides": {...}}`,
+    sent as `application/json`. A spec over this service's limits (memory, env steps,
+    evaluation; docs/service.md) is 422 naming the field to lower; a full queue is 429."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype != "application/json":
+        # Also a guard: a page of another site can send text/plain or a form without asking first.
+        raise HTTPException(415, f"send the body as application/json (Content-Type was {ctype[:80] or 'missing'!r})")
     try:
-        spec = spec_from_body(decode_json(await request.body()))
+        body = decode_json(await request.body())
+        spec = spec_from_body(body)
+        problems = check_limits(spec, settings.limits())
+        if problems:
+            prefix = ["overrides"] if "preset" in body else []  # a valid spec came from a JSON object
+            raise Invalid([{"loc": ["body", *prefix, *loc], "msg": msg, "type": "resource_limit"}
+                           for loc, msg in problems])
     except BadRequest as exc:
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
         return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
+    active = await run_in_threadpool(store.active_count)
+    if active >= settings.max_active_jobs:
+        raise HTTPException(429, f"{active} jobs are queued or running, the most this service takes "
+                                 f"(MODSAT_MAX_ACTIVE_JOBS = {settings.max_active_jobs}); submit again when some "
+                                 "have ended", headers={"Retry-After": "60"})
 
     def create() -> JobDetail:
         job_id = store.submit(spec.model_dump_json(), name=spec.name, algorithm=spec.algorithm,
@@ -87,11 +105,16 @@ def list_jobs(
     status: Annotated[list[JobStatus] | None, Query(description="Only jobs in these states (repeatable).")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
+    before_id: Annotated[int | None, Query(ge=1, le=2**63 - 1, description=(
+        "Only jobs with a smaller id: the cursor `next_before_id` of the previous page."))] = None,
 ) -> JobList:
-    """Jobs, newest first, one page at a time."""
-    total, rows = store.list_jobs(statuses=list(status) if status else None, limit=limit, offset=offset)
-    nxt = offset + len(rows) if offset + len(rows) < total else None
-    return JobList(total=total, limit=limit, offset=offset, next_offset=nxt, items=[job_summary(r) for r in rows])
+    """Jobs, newest first, one page at a time (by `offset`, or by the `before_id` cursor)."""
+    statuses = list(status) if status else None
+    total, rows = store.list_jobs(statuses=statuses, limit=limit + 1, offset=offset, before_id=before_id)
+    more, rows = len(rows) > limit, rows[:limit]
+    nxt = offset + len(rows) if before_id is None and offset + len(rows) < total else None
+    return JobList(total=total, limit=limit, offset=offset, next_offset=nxt,
+                   next_before_id=rows[-1]["id"] if more and rows else None, items=[job_summary(r) for r in rows])
 
 
 @router.get("/{job_id}", response_model=JobDetail, responses=_ERRORS)
@@ -203,6 +226,21 @@ def cancel_job(job_id: int, store: StoreDep, response: Response) -> CancelResult
                         job=_detail(store, job_id))
 
 
+@router.delete("/{job_id}", status_code=204, dependencies=[WriteAccess],
+               responses={**_ERRORS, 204: {"description": "Deleted"},
+                          401: {"description": "Missing or wrong bearer token"},
+                          409: {"description": "The job has not ended; cancel it first"}})
+def delete_job(job_id: int, store: StoreDep) -> Response:
+    """Delete an ended job (succeeded, failed or cancelled) with its metrics and files."""
+    outcome = store.delete_job(job_id)
+    if outcome is None:
+        raise _unknown(job_id)
+    if outcome != "deleted":
+        raise HTTPException(409, f"job {job_id} is {outcome}; cancel it first (POST /api/jobs/{job_id}/cancel), "
+                                 "then delete it once it has ended")
+    return Response(status_code=204)
+
+
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
 
 
@@ -217,16 +255,22 @@ def list_artifacts(job_id: int, store: StoreDep) -> list[ArtifactInfo]:
 
 @router.get("/{job_id}/artifacts/{name}", responses={
     **_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "The file"}})
-def download_artifact(job_id: int, name: str, store: StoreDep) -> StreamingResponse:
-    """Download one file. Only names in the job's list exist; anything else is 404."""
+def download_artifact(job_id: int, name: str, store: StoreDep,
+                      if_none_match: Annotated[str | None, Header(include_in_schema=False)] = None) -> Response:
+    """Download one file. Only names in the job's list exist; anything else is 404. The ETag
+    is the file's SHA-256: `If-None-Match` with it answers 304."""
     info = store.artifact_info(job_id, name)
     if info is None:
         if store.job_state(job_id) is None:
             raise _unknown(job_id)
         raise HTTPException(404, f"job {job_id} has no artefact named {name!r}; see /api/jobs/{job_id}/artifacts")
+    etag = f'"{info["sha256"]}"'
+    if if_none_match is not None and (if_none_match.strip() == "*" or etag in
+                                      {t.strip().removeprefix("W/") for t in if_none_match.split(",")}):
+        return Response(status_code=304, headers={"ETag": etag})
     filename = _SAFE_NAME.sub("_", f"modsat-job-{job_id}-{info['name']}")
     return StreamingResponse(
         store.iter_artifact(job_id, info["name"], int(info["size"]), info["sha256"]), media_type=info["content_type"],
-        headers={"Content-Length": str(info["size"]), "ETag": f'"{info["sha256"]}"',
+        headers={"Content-Length": str(info["size"]), "ETag": etag,
                  "Content-Disposition": f'attachment; filename="{filename}"'},
     )

@@ -8,6 +8,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from modsat_core.presets import PRESETS
+
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
 
@@ -27,7 +29,8 @@ class PresetSubmission(BaseModel):
         {"preset": "quick", "overrides": {"seed": 3, "training": {"total_env_steps": 10000}}},
     ]})
 
-    preset: str = Field(description="Name of a preset (GET /api/presets).")
+    preset: str = Field(description="Name of a preset (GET /api/presets).",
+                        json_schema_extra={"enum": list(PRESETS)})
     overrides: dict[str, Any] = Field(
         default_factory=dict, description="Fields of the spec to change, nested like the spec; merged into the preset."
     )
@@ -102,6 +105,9 @@ class JobList(BaseModel):
     limit: int
     offset: int
     next_offset: int | None = Field(description="Offset of the next page, null on the last one.")
+    next_before_id: int | None = Field(
+        None, description="Cursor of the next page (pass as `before_id`), null on the last one. Unlike offsets, "
+        "cursor pages do not shift when jobs are submitted meanwhile.")
     items: list[JobSummary]
 
 

@@ -3,8 +3,9 @@
 
 from __future__ import annotations
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 
+from modsat_viewer.origin import host_names
 from worker.settings import WorkerSettings
 
 
@@ -29,4 +30,31 @@ class ServerSettings(WorkerSettings):
         8080, ge=0, le=65535,
         description="Port of the live 3D viewer; 0 = any free port. A busy port moves it up (see GET /api/viewer).",
     )
+    allowed_hosts: str = Field(
+        "",
+        description="Comma-separated extra host names (or IP addresses) the server answers to, besides "
+        "localhost, 127.0.0.1, ::1 and `host`; `*` = any. Other `Host` headers get 400 (DNS rebinding).",
+    )
+    allowed_origins: str = Field(
+        "",
+        description="Comma-separated extra origins (e.g. `https://ops.example.org`) whose pages may write "
+        "(POST, DELETE). A browser write from any other origin is 403; the page itself is same-origin.",
+    )
+    max_active_jobs: int = Field(
+        100, ge=1, le=1_000_000, description="Queued plus running jobs; a submission beyond it is 429."
+    )
     web_dir: str | None = Field(None, description="Directory of the web UI's files (default: the repository's web/).")
+
+    @field_validator("api_token")
+    @classmethod
+    def _token_not_empty(cls, v: SecretStr | None) -> SecretStr | None:
+        if v is not None and not v.get_secret_value().strip():
+            raise ValueError("MODSAT_API_TOKEN is set but empty: unset it for an open server, or give a token")
+        return v
+
+    def host_names(self) -> set[str] | None:
+        """Host names the server answers to (lower case, no port), or None for any."""
+        return host_names(self.host, self.allowed_hosts)
+
+    def origin_list(self) -> set[str]:
+        return {o.strip().rstrip("/").lower() for o in self.allowed_origins.split(",") if o.strip()}

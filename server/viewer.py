@@ -72,7 +72,8 @@ def start_viewer(settings: ServerSettings, store):
     from modsat_viewer.live import ViewerApp
 
     try:
-        app = ViewerApp(StoreRuns(store), host=settings.host, port=settings.viewer_port)
+        app = ViewerApp(StoreRuns(store), host=settings.host, port=settings.viewer_port,
+                        allowed_hosts=settings.host_names())
     except Exception:  # noqa: BLE001 - the API works without the viewer; say why it is missing
         log.exception("the 3D viewer could not start; the API runs without it")
         return None

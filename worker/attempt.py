@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlchemyError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 
+from modsat_core.limits import check as check_limits
 from modsat_core.spec import SpecError, parse_spec
 
 from .child import ORPHAN_EXIT_CODE, child_main
@@ -98,9 +99,14 @@ class Attempt:
         """Returns the attempt's outcome (for logs): succeeded, failed, crashed, cancelled, released, lost."""
         c = self.claim
         try:
-            parse_spec(c.spec_json)
+            spec = parse_spec(c.spec_json)
         except SpecError as exc:
             self.store.fail_permanently(c, error=f"stored spec is not valid for this worker: {exc}")
+            return "failed"
+        problems = check_limits(spec, self.s.limits())
+        if problems:  # this worker's limits may be lower than those of the API that took the job
+            self.store.fail_permanently(c, error="this worker's limits refuse the job: "
+                                        + "; ".join(msg for _, msg in problems))
             return "failed"
         checkpoint = self.store.load_checkpoint(c.job_id) if c.checkpoint_env_steps is not None else None
         log.info("job %s attempt %s: starting%s", c.job_id, c.attempt,
@@ -110,7 +116,8 @@ class Attempt:
         reader, writer = ctx.Pipe(duplex=False)
         stop = ctx.Event()
         proc = ctx.Process(target=child_main, name=f"modsat-job-{c.job_id}", daemon=True,
-                           args=(writer, stop, self.s.runner, c.spec_json, checkpoint, os.getpid()))
+                           args=(writer, stop, self.s.runner, c.spec_json, checkpoint, os.getpid(),
+                                 self.s.torch_threads))
         proc.start()
         writer.close()  # so that the child's exit shows as EOF here
         del checkpoint
@@ -217,6 +224,11 @@ class Attempt:
                 ok = self.store.complete(c, files=files, summary=info.get("summary"), env_steps=info["env_steps"],
                                          attempt_seconds=dt)
                 return "succeeded" if ok else "lost"
+        elif result is not None and result[0] == "error" and not stopping and len(result) > 3 and result[3]:
+            status = self.store.fail_permanently(c, error=f"training cannot run: {result[1]}", detail=result[2],
+                                                 attempt_seconds=dt)
+            log.warning("job %s attempt %s: %s -> %s (no retry)", c.job_id, c.attempt, result[1], status)
+            return "failed" if status else "lost"
         elif result is not None and result[0] == "error" and not stopping:
             status = self.store.fail_attempt(c, error=f"training raised {result[1]}", detail=result[2],
                                              outcome="failed", retry_delay_s=self.s.retry_delay_s,

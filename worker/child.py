@@ -10,7 +10,8 @@ message                                    meaning
 ``("checkpoint", env_steps, bytes)``       an ``on_checkpoint`` dict, serialised
 ``("result", info, {name: bytes})``        ``train`` returned; ``info`` has ``stopped``,
                                            ``env_steps`` and ``summary``
-``("error", "Type: message", traceback)``  ``train`` raised
+``("error", "Type: message", traceback,   ``train`` raised; ``permanent``: retrying cannot
+permanent)``                                help (:class:`~modsat_core.spec.UnrunnableSpec`)
 =========================================  ===============================================
 
 ``should_stop`` is a multiprocessing Event that the parent sets on cancel or shutdown. A
@@ -41,23 +42,41 @@ def _watch_parent(parent_pid: int) -> None:
         time.sleep(0.5)
 
 
+def set_torch_threads(n: int) -> None:
+    """One torch thread per training process unless told otherwise (``MODSAT_TORCH_THREADS``):
+    torch's default (one per core) measured about 20x slower on a busy 2-core machine.
+
+    Set in the environment (for a torch imported later) and in torch if it is loaded."""
+    import sys
+
+    os.environ["OMP_NUM_THREADS"] = os.environ["MKL_NUM_THREADS"] = str(n)
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(n)
+
+
 def _plain(d: Any) -> Any:
     """Only JSON types cross the pipe, so the parent never unpickles numpy or torch objects."""
     return json.loads(to_json(d))
 
 
 def child_main(conn, stop_event, runner_name: str, spec_json: str, checkpoint: bytes | None,
-               parent_pid: int) -> None:
+               parent_pid: int, torch_threads: int = 1) -> None:
     """Entry point of the spawned process (see the module docstring for the protocol)."""
     # Ctrl-C in a terminal reaches the whole process group; the parent decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True, name="parent-watch").start()
+    permanent: tuple[type, ...] = ()
     try:
-        from modsat_core.spec import parse_spec
+        from modsat_core.spec import UnrunnableSpec, parse_spec
+
+        permanent = (UnrunnableSpec,)
+        set_torch_threads(torch_threads)
 
         from .runners import load_runner
 
         runner = load_runner(runner_name)
+        set_torch_threads(torch_threads)  # again: loading the runner may have imported torch
         spec = parse_spec(spec_json)
         resume = runner.checkpoint_from_bytes(checkpoint) if checkpoint is not None else None
         last_steps = [int(resume.get("env_steps", 0)) if isinstance(resume, dict) else 0]
@@ -81,7 +100,7 @@ def child_main(conn, stop_event, runner_name: str, spec_json: str, checkpoint: b
         conn.send(("result", info, files))
     except BaseException as exc:  # noqa: BLE001 - every failure is reported, then the child exits
         try:
-            conn.send(("error", f"{type(exc).__name__}: {exc}", traceback.format_exc()))
+            conn.send(("error", f"{type(exc).__name__}: {exc}", traceback.format_exc(), isinstance(exc, permanent)))
         except OSError:  # the parent is gone; nobody to tell
             pass
     finally:

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from modsat_core.limits import GIB, Limits
 
 DEFAULT_DATA_DIR = Path("modsat-data")
 DB_FILE_NAME = "modsat.db"
@@ -52,6 +54,40 @@ class WorkerSettings(BaseSettings):
         description="What a job runs: `train` (modsat_core.train.train), or `noop` / `simulated` / `raise` "
         "(test and benchmark runners in worker.runners), or `package.module:function`.",
     )
+
+    torch_threads: int = Field(
+        1, ge=1, le=256,
+        description="Torch threads of each training process. One per process: on a busy machine more "
+        "threads measured about 20x slower, not faster (docs/service.md).",
+    )
+    max_job_memory_gib: float | None = Field(
+        8.0, gt=0, le=1 << 20,
+        description="A spec whose estimated peak memory (replay buffer, update, stepping, evaluation; "
+        "modsat_core/limits.py) is larger is refused (422 at the API). Unset (empty) = no limit.",
+    )
+    max_env_steps: int | None = Field(
+        20_000_000, ge=1, description="Largest `training.total_env_steps` of one job. Unset = no limit."
+    )
+    max_evaluation_steps: int | None = Field(
+        50_000_000, ge=1,
+        description="Largest number of control steps a job's evaluations (curve and final, policy and PD) "
+        "may fly. Unset = no limit.",
+    )
+    max_trajectory_steps: int | None = Field(
+        200_000, ge=1, description="Largest `evaluation.trajectories` x `mission.episode_steps`. Unset = no limit."
+    )
+
+    @field_validator("max_job_memory_gib", "max_env_steps", "max_evaluation_steps", "max_trajectory_steps",
+                     mode="before")
+    @classmethod
+    def _empty_is_unset(cls, v: object) -> object:
+        return None if isinstance(v, str) and not v.strip() else v
+
+    def limits(self) -> Limits:
+        """The per-job limits these settings set (modsat_core.limits)."""
+        mem = None if self.max_job_memory_gib is None else int(self.max_job_memory_gib * GIB)
+        return Limits(max_memory_bytes=mem, max_env_steps=self.max_env_steps,
+                      max_evaluation_steps=self.max_evaluation_steps, max_trajectory_steps=self.max_trajectory_steps)
 
     @model_validator(mode="after")
     def _resolve(self) -> WorkerSettings:

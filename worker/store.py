@@ -154,14 +154,16 @@ class JobStore:
             row = conn.execute(select(jobs).where(jobs.c.id == job_id)).mappings().first()
             return dict(row) if row else None
 
-    def list_jobs(self, *, statuses: list[str] | None = None, limit: int = 50, offset: int = 0
-                  ) -> tuple[int, list[dict[str, Any]]]:
-        """(total matching, one page newest first)."""
+    def list_jobs(self, *, statuses: list[str] | None = None, limit: int = 50, offset: int = 0,
+                  before_id: int | None = None) -> tuple[int, list[dict[str, Any]]]:
+        """(total matching, one page newest first). ``before_id``: only jobs with a smaller id
+        (a cursor: pages do not shift when jobs arrive meanwhile); ``total`` ignores it."""
         where = jobs.c.status.in_(statuses) if statuses else literal(True)
+        page = where if before_id is None else and_(where, jobs.c.id < before_id)
         with self._read() as conn:
             total = conn.execute(select(func.count()).select_from(jobs).where(where)).scalar_one()
             rows = conn.execute(
-                select(*_LIST_COLUMNS).where(where).order_by(jobs.c.id.desc()).limit(limit).offset(offset)
+                select(*_LIST_COLUMNS).where(page).order_by(jobs.c.id.desc()).limit(limit).offset(offset)
             ).mappings().all()
         return int(total), [dict(r) for r in rows]
 
@@ -221,12 +223,37 @@ class JobStore:
             if status == "queued":
                 conn.execute(update(jobs).where(jobs.c.id == job_id, jobs.c.status == "queued").values(
                     status="cancelled", cancel_requested=True, finished_at=now, updated_at=now, phase=None))
+                _drop_checkpoint(conn, job_id)
                 return "stopped"
             if status == "running":
                 conn.execute(update(jobs).where(jobs.c.id == job_id, jobs.c.status == "running")
                              .values(cancel_requested=True, updated_at=now))
                 return "requested"
         return status
+
+    def active_count(self) -> int:
+        """Jobs queued or running (the service's cap on them: ``max_active_jobs``)."""
+        with self._read() as conn:
+            return int(conn.execute(select(func.count()).select_from(jobs)
+                                    .where(jobs.c.status.in_(("queued", "running")))).scalar_one())
+
+    def delete_job(self, job_id: int) -> str | None:
+        """Delete an ended job with its metrics, attempts and artefacts. Returns ``deleted``,
+        the status of a job that has not ended (``queued``, ``running``: nothing is deleted),
+        or None for an unknown job."""
+        if not _valid_id(job_id):
+            return None
+        with self._write() as conn:
+            status = conn.execute(
+                select(jobs.c.status).where(jobs.c.id == job_id).with_for_update()
+            ).scalar_one_or_none()
+            if status is None or status not in TERMINAL_STATUSES:
+                return status
+            # Children first and explicitly: SQLite enforces ON DELETE CASCADE only with a pragma.
+            for table in (artifacts, metrics, attempts):
+                conn.execute(delete(table).where(table.c.job_id == job_id))
+            conn.execute(delete(jobs).where(jobs.c.id == job_id))
+        return "deleted"
 
     # ------------------------------------------------------------------ artefacts (database store)
 
@@ -422,6 +449,7 @@ class JobStore:
             ))
             if r.rowcount != 1:
                 return False
+            _drop_checkpoint(conn, c.job_id)
             self._end_attempt(conn, c, "cancelled", now)
         return True
 
@@ -442,6 +470,8 @@ class JobStore:
                 updated_at=now, worker_id=None, lease_expires_at=None, phase=None,
                 run_seconds=jobs.c.run_seconds + attempt_seconds,
             ))
+            if cancelled:
+                _drop_checkpoint(conn, c.job_id)
             self._end_attempt(conn, c, "cancelled" if cancelled else "released", now)
         return True
 
@@ -453,10 +483,11 @@ class JobStore:
         return self._fail(c, error=error, detail=detail, outcome=outcome, retry_delay_s=retry_delay_s,
                           attempt_seconds=attempt_seconds, retry=True)
 
-    def fail_permanently(self, c: Claim, *, error: str) -> str | None:
-        """Fail the job at once, no retry (e.g. a stored spec this worker cannot read)."""
-        return self._fail(c, error=error, detail=None, outcome="failed", retry_delay_s=0.0,
-                          attempt_seconds=0.0, retry=False)
+    def fail_permanently(self, c: Claim, *, error: str, detail: str | None = None,
+                         attempt_seconds: float = 0.0) -> str | None:
+        """Fail the job at once, no retry (e.g. a stored spec this worker cannot read or run)."""
+        return self._fail(c, error=error, detail=detail, outcome="failed", retry_delay_s=0.0,
+                          attempt_seconds=attempt_seconds, retry=False)
 
     def _fail(self, c: Claim, *, error: str, detail: str | None, outcome: str, retry_delay_s: float,
               attempt_seconds: float, retry: bool) -> str | None:
@@ -475,6 +506,8 @@ class JobStore:
                 **_failure_values(status, failures, int(row.max_attempts), error, retry_delay_s, now),
                 error_detail=detail, run_seconds=jobs.c.run_seconds + attempt_seconds,
             ))
+            if status in TERMINAL_STATUSES:
+                _drop_checkpoint(conn, c.job_id)
             self._end_attempt(conn, c, outcome, now, error)
         return status
 
@@ -500,6 +533,8 @@ class JobStore:
                     **_failure_values(status, failures, c.max_attempts, error, retry_delay_s, now),
                     error_detail=None,
                 ))
+                if status in TERMINAL_STATUSES:
+                    _drop_checkpoint(conn, c.job_id)
                 self._end_attempt(conn, c, "lease-expired", now, error)
                 out.append((c.job_id, status))
         return out
@@ -508,6 +543,13 @@ class JobStore:
     def _end_attempt(conn: Connection, c: Claim, outcome: str, now: Any, error: str | None = None) -> None:
         conn.execute(update(attempts).where(attempts.c.job_id == c.job_id, attempts.c.attempt == c.attempt)
                      .values(ended_at=now, outcome=outcome, error=error))
+
+
+def _drop_checkpoint(conn: Connection, job_id: int) -> None:
+    """A job that has ended without success will not resume: its checkpoint (often the largest
+    file, replay buffer included) is deleted."""
+    conn.execute(delete(artifacts).where(artifacts.c.job_id == job_id, artifacts.c.kind == "checkpoint"))
+    conn.execute(update(jobs).where(jobs.c.id == job_id).values(checkpoint_env_steps=None))
 
 
 def _no_nul(text: str | None) -> str | None:

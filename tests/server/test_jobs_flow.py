@@ -27,7 +27,8 @@ def test_cancel_running_job_over_http(start_server, sqlite_url, spawn_worker):
     assert r.json()["job"]["cancel_requested"] is True
     job = wait_for(lambda: (j := _job(s, job_id))["status"] == "cancelled" and j, 15, "the job to be cancelled")
     assert job["progress"]["env_steps"] < 100_000
-    assert job["progress"]["checkpoint_env_steps"] is not None
+    assert job["progress"]["checkpoint_env_steps"] is None, "a cancelled job does not keep its checkpoint"
+    assert "checkpoint.pt" not in [a["name"] for a in s.client.get(f"/api/jobs/{job_id}/artifacts").json()]
     assert [a["outcome"] for a in job["attempts"]] == ["cancelled"]
     assert s.client.post(f"/api/jobs/{job_id}/cancel").status_code == 200
 

@@ -117,3 +117,37 @@ def test_live_viewer_sessions(tmp_path):
         assert len(s.runs) == 1
     finally:
         app.stop()
+
+
+def test_live_viewer_refuses_tabs_of_other_sites(tmp_path):
+    """A tab whose websocket handshake came from a page of another site, or named a host this
+    viewer does not answer to (DNS rebinding), gets no session (no run data). The service's own
+    page, on another port of localhost, does (tests/web drive that one in a real browser)."""
+    from types import SimpleNamespace
+
+    from modsat_viewer.live import DirRuns, ViewerApp
+    from modsat_viewer.origin import host_names, origin_allowed
+
+    d = tmp_path / "a"
+    d.mkdir()
+    for k, v in _files().items():
+        (d / k).write_bytes(v)
+    app = ViewerApp(DirRuns([d]), port=0)
+    try:
+        def refused(**headers):
+            conn = SimpleNamespace(request=SimpleNamespace(headers=headers, path="/?run=1"))
+            app._connection = lambda client: conn  # viser's handshake request, as _connection reads it
+            return app._refused(SimpleNamespace(client_id=0))
+
+        here = f"127.0.0.1:{app.port}"
+        assert refused(Host=here, Origin="http://127.0.0.1:8000") is None, "the service's page"
+        assert refused(Host=here, Origin="http://localhost:8000") is None
+        assert refused(Host=here) is None, "no Origin: not a browser"
+        assert "another site" in refused(Host=here, Origin="http://evil.example")
+        assert "another site" in refused(Host=here, Origin="null")
+        assert "host" in refused(Host="evil.example:8080", Origin="http://evil.example:8080")
+    finally:
+        app.stop()
+    assert host_names("0.0.0.0", "sat.lab, 10.0.0.5") == {"localhost", "127.0.0.1", "::1", "sat.lab", "10.0.0.5"}
+    assert host_names("127.0.0.1", "*") is None and origin_allowed("http://evil.example", None)
+    assert not origin_allowed("http://[bad", {"localhost"})

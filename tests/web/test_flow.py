@@ -143,6 +143,36 @@ def test_open_the_3d_view_and_go_mid_slew(service, new_page):
     page.locator("#view-box").screenshot(path=str(shots / "satellite-mid-slew-page.png"))
 
 
+def test_a_page_of_another_site_gets_no_view(service, new_page):
+    """The live viewer's websocket is reachable from any page the user has open; a page of
+    another origin (here viser's own client, served from 127.0.0.2) is refused before it sees a run."""
+    import functools
+    import http.server
+    import threading
+    from pathlib import Path
+    from urllib.parse import quote
+
+    import viser
+
+    _need("rl")
+    client_dir = Path(viser.__file__).resolve().parent / "client" / "build"
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(client_dir))
+    other = http.server.ThreadingHTTPServer(("127.0.0.2", 0), handler)
+    threading.Thread(target=other.serve_forever, daemon=True).start()
+    try:
+        vport = service.client.get("/api/viewer").json()["port"]
+        page = new_page()
+        ws = quote(f"ws://127.0.0.1:{vport}/?run={RUN['rl']}", safe="")
+        page.goto(f"http://127.0.0.2:{other.server_port}/?websocket={ws}")
+        wait_for(lambda: "refused a websocket: a page of another site ('http://127.0.0.2" in service.log(), 60,
+                 "the viewer to refuse the foreign page")
+        time.sleep(2.0)
+        assert page.get_by_text(f"job {RUN['rl']}").count() == 0, "no run reached the foreign page"
+    finally:
+        other.shutdown()
+        other.server_close()
+
+
 def test_rl_and_ga_side_by_side(service, new_page):
     _need("rl", "ga")
     shots = screenshot_dir()

@@ -30,3 +30,14 @@ def long_file_name(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=
     result = noop(spec, on_progress=on_progress, on_checkpoint=on_checkpoint, should_stop=should_stop)
     result.files["x" * 300 + ".json"] = b"{}"
     return result
+
+
+def torch_threads(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None):
+    """The noop run, reporting the torch threads the training process was given."""
+    import torch
+
+    from worker.runners import noop
+
+    result = noop(spec, on_progress=on_progress, on_checkpoint=on_checkpoint, should_stop=should_stop)
+    result.summary = {"threads": torch.get_num_threads(), "omp": os.environ.get("OMP_NUM_THREADS")}
+    return result

@@ -11,12 +11,13 @@ from __future__ import annotations
 import json
 import signal
 
+import pytest
 
 from modsat_core.presets import get_preset
 from modsat_core.spec import parse_spec
 from worker.store import JobStore
 
-from .helpers import pid_alive, submit, wait_for
+from .helpers import pid_alive, spec_json, submit, wait_for
 
 
 def _status(store, job_id):
@@ -136,7 +137,9 @@ def test_cancel_running_job(store, db_url, spawn_worker):
     assert store.request_cancel(job_id) == "requested"
     wait_for(lambda: _status(store, job_id) == "cancelled", 10, "the job to be cancelled")
     job = store.get_job(job_id)
-    assert job["env_steps"] < 60_000 and job["checkpoint_env_steps"] is not None, "stopped with a checkpoint"
+    assert job["env_steps"] < 60_000, "stopped early"
+    # A cancelled job will not resume: its checkpoint is not kept (disk).
+    assert job["checkpoint_env_steps"] is None and store.artifact_info(job_id, "checkpoint.pt") is None
     assert _outcomes(store, job_id) == [(1, "cancelled")]
     after = submit(store, 160)  # the worker carries on with the next job
     wait_for(lambda: _status(store, after) == "succeeded", 30, "the next job to succeed")
@@ -195,3 +198,43 @@ def test_result_the_database_refuses_fails_the_attempt_instead_of_hanging(store,
         job = store.get_job(job_id)
         assert job["status"] == "failed" and "worker error: DataError" in job["error"], job["error"]
         assert _outcomes(store, job_id) == [(1, "crashed"), (2, "crashed")]
+
+
+def test_training_gets_one_torch_thread_by_default(store, db_url, spawn_worker):
+    """Torch's default (a thread per core) measured about 20x slower on a busy 2-core machine."""
+    first = submit(store, 160)
+    w = spawn_worker(db_url, "tests.worker.runners_for_tests:torch_threads")
+    wait_for(lambda: _status(store, first) == "succeeded", 60, "the job to succeed")
+    assert json.loads(store.get_job(first)["summary"]) == {"threads": 1, "omp": "1"}
+    w.stop()
+    second = submit(store, 160)
+    spawn_worker(db_url, "tests.worker.runners_for_tests:torch_threads", env={"MODSAT_TORCH_THREADS": "2"})
+    wait_for(lambda: _status(store, second) == "succeeded", 60, "the job to succeed")
+    assert json.loads(store.get_job(second)["summary"])["threads"] == 2
+
+
+def test_spec_that_cannot_run_here_fails_once_without_retries(store, db_url, spawn_worker):
+    """device 'cuda' on a machine without a GPU: the same error three times helps nobody."""
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU: device 'cuda' runs here")
+    spec = json.loads(spec_json(160))
+    spec["training"]["device"] = "cuda"
+    job_id = store.submit(json.dumps(spec), name="cuda", algorithm="td3-codesign", total_env_steps=160, max_attempts=3)
+    spawn_worker(db_url, "train")
+    wait_for(lambda: _status(store, job_id) == "failed", 90, "the job to fail")
+    job = store.get_job(job_id)
+    assert job["attempt"] == 1 and job["failures"] == 1
+    assert "torch sees no GPU" in job["error"] and "Traceback" in job["error_detail"]
+    assert _outcomes(store, job_id) == [(1, "failed")]
+
+
+def test_worker_refuses_a_job_over_its_own_limits(store, db_url, spawn_worker):
+    """Workers may run on smaller machines than the API assumed: they check the limits again."""
+    job_id = submit(store, 160)
+    spawn_worker(db_url, "noop", env={"MODSAT_MAX_ENV_STEPS": "100"})
+    wait_for(lambda: _status(store, job_id) == "failed", 60, "the job to fail")
+    job = store.get_job(job_id)
+    assert "limits refuse the job" in job["error"] and "MODSAT_MAX_ENV_STEPS" in job["error"]
+    assert job["failures"] == 1

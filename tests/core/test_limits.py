@@ -1,0 +1,68 @@
+"""modsat_core/limits.py: its constants agree with the code they estimate, the presets fit the
+defaults, the issue's over-sized specs do not, and the CLI says so readably."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from modsat_core import limits
+from modsat_core.presets import PRESETS, get_preset
+from modsat_core.spec import parse_spec
+
+
+def _spec(**sections):
+    d = get_preset("quick").model_dump(mode="json")
+    for k, v in sections.items():
+        d[k] = {**d[k], **v} if isinstance(v, dict) else v
+    return parse_spec(d)
+
+
+def test_constants_agree_with_the_code():
+    from modsat_core.features import N_FEATURES
+    from modsat_core.networks import SET_CELL_WIDTH
+    from modsat_core.train import replay_buffer_bytes
+
+    assert limits.N_FEATURES == N_FEATURES and limits.SET_CELL_WIDTH == SET_CELL_WIDTH
+    for n in (2, 3, 5, 10):
+        assert limits.transition_bytes(n) * 1000 == replay_buffer_bytes(n, 1000)
+
+
+def test_validating_limits_imports_no_torch():
+    code = ("import sys; from modsat_core import limits; from modsat_core.presets import get_preset; "
+            "limits.check(get_preset('paper-5x5x5'), limits.Limits()); print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
+
+
+@pytest.mark.parametrize("name", list(PRESETS))
+def test_presets_fit_the_defaults(name):
+    assert limits.check(PRESETS[name], limits.Limits()) == []
+
+
+def test_replay_estimate_is_the_issue_figure():
+    big = _spec(design={"grid_size": 10}, training={"buffer_size": 500_000, "total_env_steps": 1_000_000})
+    est = limits.estimate(big)
+    assert est.replay_bytes / 2**30 == pytest.approx(9.36, abs=0.01)  # "9.4 GiB" in the issue
+    (loc, msg), = limits.check(big, limits.Limits())
+    assert loc == ("training", "buffer_size") and "9.4 GiB" in msg
+    assert limits.check(big, limits.Limits(max_memory_bytes=None)) == []
+
+
+def test_check_cli_is_readable(tmp_path):
+    from modsat_core.cli import main
+
+    path = tmp_path / "big.json"
+    d = get_preset("quick").model_dump(mode="json")
+    d["design"]["grid_size"] = 10
+    d["training"].update(buffer_size=500_000, total_env_steps=1_000_000)
+    path.write_text(json.dumps(d))
+    with pytest.raises(SystemExit) as exc:
+        main(["check", str(path)])
+    assert exc.value.code == 2
+    ok = tmp_path / "ok.json"
+    ok.write_text(get_preset("quick").model_dump_json())
+    assert main(["check", str(ok)]) == 0

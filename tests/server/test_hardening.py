@@ -1,0 +1,209 @@
+"""Service hardening over real HTTP: other web pages cannot write or read through the user's
+browser (Host, Origin, content type), no spec can exhaust the host, strict input types, the
+queue cap, deleting jobs, conditional downloads, JSON 404s, the OpenAPI security scheme."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import pytest
+
+from modsat_core.presets import get_preset
+from server.settings import ServerSettings
+from tests.worker.helpers import wait_for
+
+TINY = {"preset": "quick", "overrides": {"training": {"total_env_steps": 400}}}
+EVIL = "http://evil.example"
+
+
+def _raw(api, method: str, path: str, body: bytes = b"", **headers: str) -> httpx.Response:
+    return api.client.request(method, path, content=body, headers=headers)
+
+
+# ----------------------------------------------------------------------------- other web pages
+
+def test_simple_cross_site_post_is_refused(api):
+    """What a page on another site can send without a preflight: text/plain or a form, with its Origin."""
+    body = json.dumps(TINY).encode()
+    before = api.client.get("/api/jobs").json()["total"]
+    r = _raw(api, "POST", "/api/jobs", body, **{"content-type": "text/plain", "origin": EVIL})
+    assert r.status_code == 403 and "another origin" in r.json()["detail"]
+    r = _raw(api, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": EVIL})
+    assert r.status_code == 403, "a foreign Origin is refused whatever the content type"
+    r = _raw(api, "POST", "/api/jobs", body, **{"content-type": "application/json", "sec-fetch-site": "cross-site"})
+    assert r.status_code == 403, "a browser that says cross-site, even without Origin"
+    r = _raw(api, "POST", "/api/jobs", body, **{"content-type": "text/plain"})
+    assert r.status_code == 415 and "application/json" in r.json()["detail"]
+    r = _raw(api, "POST", "/api/jobs", body, **{"content-type": "application/x-www-form-urlencoded"})
+    assert r.status_code == 415
+    r = _raw(api, "POST", "/api/jobs", body, **{"origin": "null", "content-type": "application/json"})
+    assert r.status_code == 403, "sandboxed pages and file:// send Origin: null"
+    assert api.client.get("/api/jobs").json()["total"] == before, "nothing was queued"
+
+
+def test_same_origin_and_non_browser_writes_work(api):
+    body = json.dumps(TINY).encode()
+    r = _raw(api, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": api.base,
+                                                 "sec-fetch-site": "same-origin"})
+    assert r.status_code == 201, r.text
+    job_id = r.json()["id"]
+    r = _raw(api, "POST", f"/api/jobs/{job_id}/cancel", origin=EVIL)
+    assert r.status_code == 403 and api.client.get(f"/api/jobs/{job_id}").json()["status"] == "queued"
+    r = _raw(api, "DELETE", f"/api/jobs/{job_id}", origin=EVIL)
+    assert r.status_code == 403
+    assert _raw(api, "POST", f"/api/jobs/{job_id}/cancel", origin=api.base).status_code == 200
+    # curl and scripts send no Origin: unaffected
+    assert api.client.post("/api/jobs", json=TINY).status_code == 201
+
+
+def test_foreign_host_header_is_refused_for_reads_too(api):
+    """DNS rebinding: a page on evil.example whose name resolves to 127.0.0.1 would read everything."""
+    for path in ("/api/jobs", "/api/health", "/"):
+        r = _raw(api, "GET", path, host="evil.example:%d" % api.port)
+        assert r.status_code == 400 and "MODSAT_ALLOWED_HOSTS" in r.json()["detail"], path
+    for host in (f"localhost:{api.port}", f"127.0.0.1:{api.port}", "localhost"):
+        assert _raw(api, "GET", "/api/health", host=host).status_code == 200, host
+    assert _raw(api, "GET", "/api/health", host="[::1]:%d" % api.port).status_code == 200
+    assert _raw(api, "GET", "/api/health", host="a:b:c").status_code == 400
+
+
+def test_allowed_hosts_and_origins_are_settings(start_server, sqlite_url):
+    s = start_server(sqlite_url, env={"MODSAT_ALLOWED_HOSTS": "sat.lab.example, 10.0.0.5",
+                                      "MODSAT_ALLOWED_ORIGINS": "https://ops.lab.example"})
+    assert _raw(s, "GET", "/api/health", host="sat.lab.example:8000").status_code == 200
+    assert _raw(s, "GET", "/api/health", host="10.0.0.5").status_code == 200
+    assert _raw(s, "GET", "/api/health", host="evil.example").status_code == 400
+    body = json.dumps(TINY).encode()
+    r = _raw(s, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": "https://ops.lab.example"})
+    assert r.status_code == 201, r.text
+    r = _raw(s, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": "https://ops.lab.example.evil"})
+    assert r.status_code == 403
+
+
+def test_an_empty_token_is_an_error_not_the_token_empty(monkeypatch):
+    monkeypatch.setenv("MODSAT_API_TOKEN", "")
+    with pytest.raises(ValueError, match="MODSAT_API_TOKEN is set but empty"):
+        ServerSettings()
+    monkeypatch.setenv("MODSAT_API_TOKEN", "  ")
+    with pytest.raises(ValueError, match="empty"):
+        ServerSettings()
+
+
+# ----------------------------------------------------------------------------- specs that exhaust the host
+
+def _preset(**sections) -> dict:
+    return {"preset": "quick", "overrides": sections}
+
+
+@pytest.mark.parametrize("body, field, words", [
+    # the issue's examples: a 10^3 grid with a 500,000-transition buffer is 9.4 GiB before the first step
+    (_preset(design={"grid_size": 10}, training={"buffer_size": 500_000, "total_env_steps": 1_000_000}),
+     "training.buffer_size", "GiB of memory"),
+    (_preset(design={"grid_size": 10}, training={"buffer_size": 10_000_000, "total_env_steps": 20_000_000}),
+     "training.buffer_size", "MODSAT_MAX_JOB_MEMORY_GIB"),
+    (_preset(training={"total_env_steps": 1_000_000_000}), "training.total_env_steps", "MODSAT_MAX_ENV_STEPS"),
+    (_preset(design={"grid_size": 10}, training={"num_envs": 8192}), "training.num_envs", "GiB of memory"),
+    (_preset(mission={"episode_steps": 100_000}, evaluation={"episodes": 10_000}), "evaluation.episodes",
+     "MODSAT_MAX_EVALUATION_STEPS"),
+    (_preset(training={"eval_every_steps": 1}), "training.eval_every_steps", "control steps"),
+    (_preset(mission={"episode_steps": 100_000}, evaluation={"trajectories": 50, "episodes": 50}),
+     "evaluation.trajectories", "recorded steps"),
+    # batch larger than the buffer: could never run
+    (_preset(training={"batch_size": 65536, "buffer_size": 100}), "training.buffer_size", "at least batch_size"),
+    # strict types
+    (_preset(seed="3"), "seed", "valid integer"),
+    (_preset(training={"total_env_steps": True}), "training.total_env_steps", "valid integer"),
+    (_preset(training={"total_env_steps": 400.0}), "training.total_env_steps", "valid integer"),
+])
+def test_specs_a_host_cannot_take_are_422_naming_the_field(api, body, field, words):
+    before = api.client.get("/api/jobs").json()["total"]
+    r = api.client.post("/api/jobs", json=body)
+    assert r.status_code == 422, r.text
+    messages = r.json()["messages"]
+    assert any(m.startswith(field) for m in messages), messages
+    assert any(words in m for m in messages), messages
+    locs = [".".join(map(str, e["loc"])) for e in r.json()["detail"]]
+    assert any(loc == f"body.overrides.{field}" for loc in locs), locs
+    assert api.client.get("/api/jobs").json()["total"] == before
+
+
+def test_every_preset_fits_the_default_limits(api):
+    for name in ("quick", "cpu-3x3x3", "paper-3x3x3", "paper-5x5x5", "ga-3x3x3", "ga-5x5x5"):
+        spec = get_preset(name).model_dump(mode="json")
+        r = api.client.post("/api/jobs", json=spec)
+        assert r.status_code == 201, (name, r.text)
+        assert api.client.post(f"/api/jobs/{r.json()['id']}/cancel").status_code == 200
+
+
+def test_queue_cap_is_429(start_server, sqlite_url):
+    s = start_server(sqlite_url, env={"MODSAT_MAX_ACTIVE_JOBS": "2"})
+    ids = [s.client.post("/api/jobs", json=TINY).json()["id"] for _ in range(2)]
+    r = s.client.post("/api/jobs", json=TINY)
+    assert r.status_code == 429 and "MODSAT_MAX_ACTIVE_JOBS" in r.json()["detail"] and r.headers["retry-after"]
+    s.client.post(f"/api/jobs/{ids[0]}/cancel")
+    assert s.client.post("/api/jobs", json=TINY).status_code == 201, "an ended job frees its place"
+
+
+# ----------------------------------------------------------------------------- deleting, downloads, 404s
+
+def test_delete_an_ended_job(api):
+    job_id = api.client.post("/api/jobs", json=TINY).json()["id"]
+    r = api.client.delete(f"/api/jobs/{job_id}")
+    assert r.status_code == 409 and "cancel it first" in r.json()["detail"]
+    api.client.post(f"/api/jobs/{job_id}/cancel")
+    assert api.client.delete(f"/api/jobs/{job_id}").status_code == 204
+    assert api.client.get(f"/api/jobs/{job_id}").status_code == 404
+    assert api.client.get(f"/api/jobs/{job_id}/metrics").status_code == 404
+    assert api.client.delete(f"/api/jobs/{job_id}").status_code == 404
+    assert api.client.delete("/api/jobs/99999999").status_code == 404
+
+
+def test_finished_job_download_answers_if_none_match_and_can_be_deleted(start_server, sqlite_url, spawn_worker):
+    s = start_server(sqlite_url)
+    job_id = s.client.post("/api/jobs", json=TINY).json()["id"]
+    spawn_worker(sqlite_url, "noop")
+    wait_for(lambda: s.client.get(f"/api/jobs/{job_id}").json()["status"] == "succeeded", 60, "the job to succeed")
+    r = s.client.get(f"/api/jobs/{job_id}/artifacts/result.json")
+    assert r.status_code == 200 and r.content == b'{"runner": "noop"}'
+    etag = r.headers["etag"]
+    again = s.client.get(f"/api/jobs/{job_id}/artifacts/result.json", headers={"If-None-Match": etag})
+    assert again.status_code == 304 and again.content == b"" and again.headers["etag"] == etag
+    other = s.client.get(f"/api/jobs/{job_id}/artifacts/result.json", headers={"If-None-Match": '"abc"'})
+    assert other.status_code == 200
+    assert s.client.delete(f"/api/jobs/{job_id}").status_code == 204
+    assert s.client.get(f"/api/jobs/{job_id}/artifacts/result.json").status_code == 404
+
+
+def test_unknown_api_paths_are_json_404(api):
+    for method, path in (("GET", "/api/nope"), ("POST", "/api/jobs/1/nope"), ("GET", "/api/jobs/1/x/y")):
+        r = api.client.request(method, path)
+        assert r.status_code in (404, 405), (method, path, r.status_code)
+        assert r.headers["content-type"].startswith("application/json"), (method, path)
+    r = api.client.get("/api/nope")
+    assert r.status_code == 404 and "/api/docs" in r.json()["detail"]
+
+
+def test_openapi_declares_the_bearer_token_only_when_one_is_set(api, start_server, sqlite_url):
+    open_schema = api.client.get("/api/openapi.json").json()
+    post = open_schema["paths"]["/api/jobs"]["post"]
+    assert "security" not in post and "401" not in post["responses"]
+    assert "securitySchemes" not in open_schema["components"]
+    assert open_schema["components"]["schemas"]["PresetSubmission"]["properties"]["preset"]["enum"] == [
+        "paper-3x3x3", "paper-5x5x5", "ga-3x3x3", "ga-5x5x5", "quick", "cpu-3x3x3"]
+    s = start_server(sqlite_url, env={"MODSAT_API_TOKEN": "s3cret"})
+    closed = s.client.get("/api/openapi.json").json()
+    assert closed["paths"]["/api/jobs"]["post"]["security"] and "securitySchemes" in closed["components"]
+
+
+def test_cursor_pages_do_not_shift_when_jobs_arrive(start_server, sqlite_url):
+    s = start_server(sqlite_url)
+    ids = [s.client.post("/api/jobs", json=TINY).json()["id"] for _ in range(5)]
+    first = s.client.get("/api/jobs", params={"limit": 2}).json()
+    assert [j["id"] for j in first["items"]] == ids[:2:-1][:2] and first["next_before_id"] == ids[3]
+    s.client.post("/api/jobs", json=TINY)  # arrives between two pages: offset pages would repeat a job
+    second = s.client.get("/api/jobs", params={"limit": 2, "before_id": first["next_before_id"]}).json()
+    assert [j["id"] for j in second["items"]] == [ids[2], ids[1]]
+    last = s.client.get("/api/jobs", params={"limit": 2, "before_id": second["next_before_id"]}).json()
+    assert [j["id"] for j in last["items"]] == [ids[0]] and last["next_before_id"] is None
+    assert s.client.get("/api/jobs", params={"before_id": 0}).status_code == 422
