@@ -278,6 +278,13 @@ class Training(_Section):
             "of them, then narrowed. null = constant."
         ),
     )
+    n_step: int = Field(
+        1, ge=1, le=20,
+        description=(
+            "Steps of reward summed before bootstrapping in the critic's target (n-step return, "
+            "stopping at the episode's end). 1 = the paper's one-step TD3."
+        ),
+    )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
     noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
     policy_delay: int = Field(2, ge=1, le=100, description="Critic updates per actor/target update.")

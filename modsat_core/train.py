@@ -78,13 +78,15 @@ def _never() -> bool:
 
 
 def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
-    """The compact transition layout: two compact states, the action, reward, terminal."""
+    """The compact transition layout: two compact states, the action, reward, terminal, and
+    ``done`` (the episode ended there, also by its time limit: where n-step returns stop)."""
     C = N**3
     state = {"grid": ((C,), torch.uint8), "design_step": ((), torch.int16), "q_BN": ((4,), torch.float32),
              "q_TN": ((4,), torch.float32), "omega_B": ((3,), torch.float32), "h_cells": ((C, 3), torch.float16)}
     fields = {f"obs_{k}": v for k, v in state.items()}
     fields.update({f"next_{k}": v for k, v in state.items()})
-    fields.update({"action": ((C, 3), torch.float16), "reward": ((), torch.float32), "terminal": ((), torch.bool)})
+    fields.update({"action": ((C, 3), torch.float16), "reward": ((), torch.float32), "terminal": ((), torch.bool),
+                   "done": ((), torch.bool)})
     return fields
 
 
@@ -381,7 +383,7 @@ class TD3Run:
             action = self._act(obs)
             st = self.env.step(action)
             self.buffer.add({**obs_c.as_dict("obs_"), **st.next_state.as_dict("next_"), "action": action,
-                             "reward": st.reward, "terminal": st.terminal})
+                             "reward": st.reward, "terminal": st.terminal, "done": st.done})
             self.recent.extend(st.finished)
             self.env_steps += B
             if self.env_steps >= self.t.learning_starts and self.buffer.size >= self.t.batch_size:
@@ -405,12 +407,17 @@ class TD3Run:
         return False
 
     def _update(self) -> None:
-        b = self.buffer.sample(self.t.batch_size, self.gen)
+        discount = None
+        if self.t.n_step > 1:
+            b, discount = self.buffer.sample_n_step(self.t.batch_size, self.t.n_step, self.env.B, self.t.gamma,
+                                                    self.gen)
+        else:
+            b = self.buffer.sample(self.t.batch_size, self.gen)
         N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
         obs = observe_compact(Compact.from_dict(b, "obs_"), N, D, rl)
         nxt = observe_compact(Compact.from_dict(b, "next_"), N, D, rl)
         action = b["action"].float()
-        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen)
+        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount)
 
     def evaluate_now(self) -> dict:
         actor = self._eval_actor()

@@ -64,11 +64,16 @@ def test_same_seed_same_curve_on_cpu(network):
     assert c != a
 
 
-@pytest.mark.parametrize("network,explored", [(n, 1.0) for n in NETWORKS] + [("set", 0.5)])
-def test_stop_and_resume_continues_from_the_checkpoint(network, explored):
+@pytest.mark.parametrize("network,explored,n_step", [(n, 1.0, 1) for n in NETWORKS] + [("set", 0.5, 1),
+                                                                                          ("set", 1.0, 3)])
+def test_stop_and_resume_continues_from_the_checkpoint(network, explored, n_step):
     spec = tiny_spec(training__network=network, training__design_exploration_episodes=explored,
-                     training__exploration_noise_final=0.0, training__design_exploration_final=0.0)
+                     training__exploration_noise_final=0.0, training__design_exploration_final=0.0,
+                     training__n_step=n_step, design__repair=n_step > 1)  # repaired designs fly: returns vary
     full = train(spec)
+    if n_step > 1:  # the n-step targets are really used
+        assert full.curve != train(spec.model_copy(update={"training": spec.training.model_copy(
+            update={"n_step": 1})})).curve
     ckpts: list[bytes] = []
     seen = []
 
