@@ -108,30 +108,50 @@ class Attempt:
             self.store.fail_permanently(c, error="this worker's limits refuse the job: "
                                         + "; ".join(msg for _, msg in problems))
             return "failed"
-        checkpoint = self.store.load_checkpoint(c.job_id) if c.checkpoint_env_steps is not None else None
-        log.info("job %s attempt %s: starting%s", c.job_id, c.attempt,
-                 f" from the checkpoint at {c.checkpoint_env_steps} env steps" if checkpoint else "")
-
-        ctx = mp.get_context("spawn")
-        reader, writer = ctx.Pipe(duplex=False)
-        stop = ctx.Event()
-        proc = ctx.Process(target=child_main, name=f"modsat-job-{c.job_id}", daemon=True,
-                           args=(writer, stop, self.s.runner, c.spec_json, checkpoint, os.getpid(),
-                                 self.s.torch_threads))
-        proc.start()
-        writer.close()  # so that the child's exit shows as EOF here
-        del checkpoint
+        # The heartbeat runs from here on: loading a large checkpoint must not cost the lease.
         beat = threading.Thread(target=self._heartbeat_loop, daemon=True, name=f"heartbeat-{c.job_id}")
         beat.start()
+        proc = reader = None
         try:
+            checkpoint = self._load_checkpoint() if c.checkpoint_env_steps is not None else None
+            if self.flags.lost.is_set():
+                return "lost"
+            log.info("job %s attempt %s: starting%s", c.job_id, c.attempt,
+                     f" from the checkpoint at {c.checkpoint_env_steps} env steps" if checkpoint else "")
+            ctx = mp.get_context("spawn")
+            reader, writer = ctx.Pipe(duplex=False)
+            stop = ctx.Event()
+            proc = ctx.Process(target=child_main, name=f"modsat-job-{c.job_id}", daemon=True,
+                               args=(writer, stop, self.s.runner, c.spec_json, checkpoint, os.getpid(),
+                                     self.s.torch_threads))
+            proc.start()
+            writer.close()  # so that the child's exit shows as EOF here
+            del checkpoint
             return self._supervise(proc, reader, stop)
         finally:
             self.flags.done.set()
-            if proc.is_alive():
-                proc.kill()
-            proc.join(10)
-            reader.close()
+            if proc is not None:
+                if proc.is_alive():
+                    proc.kill()
+                proc.join(10)
+                reader.close()
             beat.join(10)
+
+    def _load_checkpoint(self) -> bytes | None:
+        """The job's checkpoint, read again through a brief database outage (it is not the
+        job's fault, so it must not cost one of its attempts); the heartbeat keeps the lease."""
+        delay = 0.5
+        for _ in range(8):
+            try:
+                return self.store.load_checkpoint(self.claim.job_id)
+            except SQLAlchemyError as exc:
+                if not _transient(exc) or self.flags.lost.is_set():
+                    raise
+                log.error("job %s: could not read its checkpoint (retrying in %.1f s): %s",
+                          self.claim.job_id, delay, exc)
+                time.sleep(delay)
+                delay = min(2 * delay, 10.0)
+        return self.store.load_checkpoint(self.claim.job_id)
 
     def _supervise(self, proc, reader, stop) -> str:
         c = self.claim
