@@ -214,11 +214,18 @@ class _ProgressBar:
         self.stream, self.t0, self.time = stream, time.monotonic(), time.monotonic
         self.tty = stream.isatty()
         self.last_eval = ""
+        self.recent: list[tuple[float, int]] = []  # (time, env steps) of the last minute
 
     def __call__(self, p: dict) -> None:
         done, total = p["env_steps"], max(p["total_env_steps"], 1)
-        el = self.time() - self.t0
-        rate = done / el if el > 0 else 0.0
+        now = self.time()
+        # The rate of the last minute, not since the start: a resumed run starts at its
+        # checkpoint, and the machine's load changes (the ETA once read 105 s, then 2,533 s).
+        self.recent.append((now, done))
+        while len(self.recent) > 2 and now - self.recent[1][0] >= 60.0:
+            self.recent.pop(0)  # keep one point at least a minute old (or the oldest) as the anchor
+        t_old, s_old = self.recent[0]
+        rate = (done - s_old) / (now - t_old) if now > t_old else 0.0
         eta = (total - done) / rate if rate > 0 else float("nan")
         if p.get("eval"):
             e = p["eval"]
@@ -258,7 +265,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     stop = {"flag": False}
 
     def on_sigint(*_):
-        stop["flag"] = True
+        stop["flag"] = True  # the training checkpoints and returns
 
     def save_ckpt(ck: dict) -> None:
         tmp = ckpt_path + ".tmp"
@@ -266,13 +273,15 @@ def _cmd_train(args: argparse.Namespace) -> int:
             fh.write(checkpoint_to_bytes(ck))
         os.replace(tmp, ckpt_path)
 
-    old = signal.signal(signal.SIGINT, on_sigint)
+    # Ctrl-C and SIGTERM (a scheduler, `kill`) both stop at a checkpoint that --resume continues.
+    old = {sig: signal.signal(sig, on_sigint) for sig in (signal.SIGINT, signal.SIGTERM)}
     bar = _ProgressBar()
     try:
         result = train(spec, on_progress=bar, on_checkpoint=save_ckpt, should_stop=lambda: stop["flag"],
                        checkpoint=checkpoint)
     finally:
-        signal.signal(signal.SIGINT, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
         bar.close()
     if result.stopped:
         print(f"stopped at {result.env_steps:,} env steps; continue with: modsat train ... --out {out} --resume",
@@ -480,7 +489,9 @@ def main(argv: list[str] | None = None) -> int:
     from .spec import SpecError
 
     try:
-        return args.func(args)
+        rc = args.func(args)
+        sys.stdout.flush()  # here, where a closed pipe is caught, not at exit
+        return rc
     except BrokenPipeError:  # e.g. `modsat presets quick | head`: the reader left; say nothing
         import os
 

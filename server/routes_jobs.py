@@ -229,15 +229,16 @@ def cancel_job(job_id: int, store: StoreDep, response: Response) -> CancelResult
 @router.delete("/{job_id}", status_code=204, dependencies=[WriteAccess],
                responses={**_ERRORS, 204: {"description": "Deleted"},
                           401: {"description": "Missing or wrong bearer token"},
-                          409: {"description": "The job has not ended; cancel it first"}})
+                          409: {"description": "The job is running; cancel it first"}})
 def delete_job(job_id: int, store: StoreDep) -> Response:
-    """Delete an ended job (succeeded, failed or cancelled) with its metrics and files."""
+    """Delete a job that is not running (queued or ended) with its metrics and files. A
+    running job is 409: cancel it, and delete it once its worker has stopped it."""
     outcome = store.delete_job(job_id)
     if outcome is None:
         raise _unknown(job_id)
     if outcome != "deleted":
-        raise HTTPException(409, f"job {job_id} is {outcome}; cancel it first (POST /api/jobs/{job_id}/cancel), "
-                                 "then delete it once it has ended")
+        raise HTTPException(409, f"job {job_id} is running; cancel it first (POST /api/jobs/{job_id}/cancel), "
+                                 "then delete it once it has stopped")
     return Response(status_code=204)
 
 

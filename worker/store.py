@@ -238,16 +238,16 @@ class JobStore:
                                     .where(jobs.c.status.in_(("queued", "running")))).scalar_one())
 
     def delete_job(self, job_id: int) -> str | None:
-        """Delete an ended job with its metrics, attempts and artefacts. Returns ``deleted``,
-        the status of a job that has not ended (``queued``, ``running``: nothing is deleted),
-        or None for an unknown job."""
+        """Delete a job that is not running (ended, or still queued: no worker holds it) with
+        its metrics, attempts and artefacts. Returns ``deleted``, ``running`` (nothing is
+        deleted: cancel it first), or None for an unknown job."""
         if not _valid_id(job_id):
             return None
         with self._write() as conn:
             status = conn.execute(
                 select(jobs.c.status).where(jobs.c.id == job_id).with_for_update()
             ).scalar_one_or_none()
-            if status is None or status not in TERMINAL_STATUSES:
+            if status is None or status == "running":
                 return status
             # Children first and explicitly: SQLite enforces ON DELETE CASCADE only with a pragma.
             for table in (artifacts, metrics, attempts):

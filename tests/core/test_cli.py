@@ -101,3 +101,51 @@ def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     assert r.returncode == 2 and "ga.population_size" in r.stderr
     r = modsat("bench", "rl-vs-ga", "--preset", "ga-3x3x3")
     assert r.returncode != 0 and "td3-codesign" in r.stderr
+
+
+def test_sigterm_stops_train_at_a_checkpoint_that_resumes(tmp_path):
+    """A scheduler or `kill` sends SIGTERM: the run stops like Ctrl-C, with a checkpoint."""
+    import signal
+    import time
+
+    from ..learning.conftest import tiny_spec
+
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(tiny_spec(training__total_env_steps=200_000, training__checkpoint_every_steps=160,
+                                   training__eval_every_steps=100_000).model_dump_json())
+    out = tmp_path / "run"
+    p = subprocess.Popen([sys.executable, "-m", "modsat_core.cli", "train", str(spec_file), "--out", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (out / "checkpoint.pt").exists() and time.monotonic() < deadline and p.poll() is None:
+        time.sleep(0.2)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    assert "--resume" in err and (out / "checkpoint.pt").exists()
+
+
+def test_a_closed_pipe_is_silent():
+    """`modsat schema | head -c 10`: the reader has left; no 'Broken pipe' message, no traceback."""
+    p = subprocess.Popen([sys.executable, "-m", "modsat_core.cli", "schema"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.close()  # before the 23 kB of schema are written
+    err = p.stderr.read().decode()
+    assert p.wait(60) == 141, err  # as a shell reports a command ended by SIGPIPE
+    assert err == "", err
+
+
+def test_progress_eta_follows_the_recent_rate():
+    import io
+
+    from modsat_core.cli import _ProgressBar
+
+    clock = [0.0]
+    bar = _ProgressBar(io.StringIO())
+    bar.time = lambda: clock[0]
+    for t, steps in ((0, 0), (100, 100_000), (200, 200_000), (300, 201_000)):  # the machine got 100x slower
+        clock[0] = float(t)
+        bar({"env_steps": steps, "total_env_steps": 300_000, "phase": "training", "eval": {"mean_return": 1.0,
+                                                                                          "success_rate": 0.0}})
+    line = bar.stream.getvalue().splitlines()[-1]
+    assert "10 steps/s" in line and "eta 9,900 s" in line, line

@@ -147,16 +147,24 @@ def test_queue_cap_is_429(start_server, sqlite_url):
 
 # ----------------------------------------------------------------------------- deleting, downloads, 404s
 
-def test_delete_an_ended_job(api):
-    job_id = api.client.post("/api/jobs", json=TINY).json()["id"]
-    r = api.client.delete(f"/api/jobs/{job_id}")
+def test_delete_queued_and_ended_jobs_not_running_ones(start_server, sqlite_url, spawn_worker):
+    s = start_server(sqlite_url)
+    queued = s.client.post("/api/jobs", json=TINY).json()["id"]
+    assert s.client.delete(f"/api/jobs/{queued}").status_code == 204, "no worker holds a queued job"
+    assert s.client.get(f"/api/jobs/{queued}").status_code == 404
+    assert s.client.get(f"/api/jobs/{queued}/metrics").status_code == 404
+    assert s.client.delete(f"/api/jobs/{queued}").status_code == 404
+    assert s.client.delete("/api/jobs/99999999").status_code == 404
+    long = {"preset": "quick", "overrides": {"training": {"total_env_steps": 1_000_000,
+                                                           "checkpoint_every_steps": 1_000_000}}}
+    running = s.client.post("/api/jobs", json=long).json()["id"]
+    spawn_worker(sqlite_url, "simulated")
+    wait_for(lambda: s.client.get(f"/api/jobs/{running}").json()["status"] == "running", 30, "the job to run")
+    r = s.client.delete(f"/api/jobs/{running}")
     assert r.status_code == 409 and "cancel it first" in r.json()["detail"]
-    api.client.post(f"/api/jobs/{job_id}/cancel")
-    assert api.client.delete(f"/api/jobs/{job_id}").status_code == 204
-    assert api.client.get(f"/api/jobs/{job_id}").status_code == 404
-    assert api.client.get(f"/api/jobs/{job_id}/metrics").status_code == 404
-    assert api.client.delete(f"/api/jobs/{job_id}").status_code == 404
-    assert api.client.delete("/api/jobs/99999999").status_code == 404
+    s.client.post(f"/api/jobs/{running}/cancel")
+    wait_for(lambda: s.client.get(f"/api/jobs/{running}").json()["status"] == "cancelled", 30, "the cancel")
+    assert s.client.delete(f"/api/jobs/{running}").status_code == 204
 
 
 def test_finished_job_download_answers_if_none_match_and_can_be_deleted(start_server, sqlite_url, spawn_worker):

@@ -115,3 +115,19 @@ def test_ctrl_c_and_restart_keep_every_job(tmp_path):
             ("released", None), ("succeeded", checkpoint)]
     finally:
         assert s3.ctrl_c() == 0
+
+
+def test_a_taken_port_is_reported_before_anything_starts(tmp_path):
+    """A second `modsat serve` on the same port: one clear line, no viewer, no worker."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        r = subprocess.run([MODSAT, "serve", "--workers", "1", "--data-dir", str(tmp_path / "d"), "--port", str(port),
+                            "--viewer-port", "0"], capture_output=True, text=True, timeout=60,
+                           env={**os.environ, **FAST_ENV})
+    assert r.returncode == 1
+    assert f"cannot listen on 127.0.0.1:{port}" in r.stderr and "--port" in r.stderr, r.stderr
+    assert "worker" not in r.stdout and "viewer" not in r.stdout.lower(), r.stdout
