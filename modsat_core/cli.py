@@ -289,8 +289,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
         return 130
     from modsat_viewer.recording import add_recording  # the 3D replay, evaluation.viser (docs/viewer.md)
 
+    from .verify import add_verification
+
     files = result.artifacts()
     add_recording(files)
+    if add_verification(files):
+        print("modsat train: the evaluation slews were flown in Basilisk too: verification.json", file=sys.stderr)
     for name, data in files.items():
         with open(os.path.join(out, name), "wb") as fh:
             fh.write(data)

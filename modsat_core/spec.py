@@ -338,6 +338,14 @@ class Evaluation(_Section):
     episodes: int = Field(100, ge=1, le=10_000, description="Slews in the final Monte-Carlo evaluation.")
     seed: int = Field(12345, ge=0, le=2**31 - 1, description="Seed of the slew set (independent of training).")
     trajectories: int = Field(3, ge=0, le=50, description="Episodes whose full time history is kept.")
+    basilisk: bool = Field(
+        False,
+        description=(
+            "Also fly the evaluation slews in Basilisk beside modsat, with the policy and the PD baseline "
+            "(`modsat verify --basilisk`, docs/verification.md); the report is `verification.json`. Needs "
+            "Basilisk where the run trains (`pip install -e '.[basilisk]'`); without it the report says so."
+        ),
+    )
 
 
 class JobSpec(_Section):

@@ -597,3 +597,34 @@ def format_report(report: dict) -> str:
                      f"rad, median {c['median_attitude_difference_rad']:.2e} rad; same successes: "
                      f"{'yes' if c['same_success'] else 'NO'}")
     return "\n".join(lines)
+
+
+#: The artefact a run whose spec asks for ``evaluation.basilisk`` gets (worker and ``modsat train``).
+ARTIFACT_NAME = "verification.json"
+
+
+def add_verification(files: dict[str, bytes]) -> bool:
+    """Add ``verification.json`` to a finished run's ``files`` if its spec asks for it
+    (``evaluation.basilisk``): the report of :func:`verify_run`, or, where Basilisk is not
+    installed, ``{"available": false, "reason": ...}``. The training itself never fails
+    because of it: an error becomes the report's reason. Returns whether it was asked for."""
+    import json
+    import tempfile
+
+    spec = parse_spec(files["spec.json"])
+    if not spec.evaluation.basilisk:
+        return False
+    if not basilisk_available():
+        report: dict = {"available": False, "reason": BASILISK_MISSING + " (on the machine that trained this run)"}
+    else:
+        try:
+            with tempfile.TemporaryDirectory(prefix="modsat-verify-") as tmp:
+                for name in ("spec.json", "design.json", "policy_export.pt"):
+                    if name in files:
+                        with open(os.path.join(tmp, name), "wb") as fh:
+                            fh.write(files[name])
+                report = {"available": True, **verify_run(tmp)}
+        except Exception as exc:  # noqa: BLE001 - the run's own results must still be stored
+            report = {"available": False, "reason": f"verification failed: {type(exc).__name__}: {exc}"}
+    files[ARTIFACT_NAME] = json.dumps(report, indent=1).encode()
+    return True

@@ -433,6 +433,38 @@ function evalTable(ev) {
       ...cols.map((c) => el("td", { class: "num", text: f(c[1][key], c[1]) }))))));
 }
 
+// verification.json (evaluation.basilisk): the same slews flown in modsat and in Basilisk.
+function verifyView(v) {
+  const head = el("h3", { text: "Basilisk verification" });
+  if (!v || v.available === false) {
+    return [head, el("p", { class: "hint", text: (v && v.reason) || "no verification report" })];
+  }
+  const ctrls = [["policy", v.controllers.policy], ["PD baseline", v.controllers.pd_baseline]]
+    .filter((c) => c[1] && c[1].available !== false);
+  const cols = ctrls.flatMap(([, c]) => [["modsat", c.modsat], ["Basilisk", c.basilisk]]);
+  const rows = [
+    ["success (mission tolerance)", "success_rate", fmt.pct],
+    ["success within 0.25 deg", "success_rate_0_25deg", fmt.pct],
+    ["success within 1 deg", "success_rate_1deg", fmt.pct],
+    ["median final error (deg)", "median_final_error_deg", fmt.num(4)],
+    ["median settling (s)", "median_settling_time_s", fmt.num(2)],
+    ["max peak rate (rad/s)", "max_peak_rate_rad_s", fmt.num(3)],
+    ["rate-limit violations", "safety_violations", fmt.int],
+  ];
+  const table = el("table", { class: "eval verify" },
+    el("thead", {},
+      el("tr", {}, el("th", { text: "" }), ...ctrls.map(([name]) => el("th", { class: "num", colspan: "2", text: name }))),
+      el("tr", {}, el("th", { text: "" }), ...cols.map((c) => el("th", { class: "num", text: c[0] })))),
+    el("tbody", {}, ...rows.map(([name, key, f]) => el("tr", {}, el("th", { text: name }),
+      ...cols.map((c) => el("td", { class: "num", text: f(c[1][key], c[1]) }))))));
+  const notes = ctrls.map(([name, c]) => el("p", { class: "hint", text:
+    `${name}: largest attitude difference modsat vs Basilisk ${c.max_attitude_difference_rad.toExponential(1)} rad`
+    + ` over ${v.episodes} slews; ${c.same_success ? "the same slews succeed" : "the simulators disagree on success"}` }));
+  const missing = v.controllers.policy && v.controllers.policy.available === false
+    ? [el("p", { class: "hint", text: v.controllers.policy.reason })] : [];
+  return [head, table, ...notes, ...missing];
+}
+
 function designLine(d) {
   if (!d) return null;
   const parts = [`${d.modules} modules`, `${d.actuators} actuators`];
@@ -469,6 +501,13 @@ async function renderFiles(job, files) {
   } else {
     evBox.replaceChildren(el("p", { class: "hint", text: TERMINAL.has(job.status)
       ? "no evaluation for this job" : "the Monte-Carlo evaluation comes when the run has finished" }));
+  }
+  const vBox = $("verification");
+  vBox.hidden = !names.has("verification.json");
+  vBox.replaceChildren();
+  if (!vBox.hidden) {
+    const r = await api(`/api/jobs/${job.id}/artifacts/verification.json`);
+    vBox.replaceChildren(...(r.ok ? verifyView(r.body) : [el("p", { class: "errors", text: errorText(r) })]));
   }
   if (names.has("curve.json")) {
     const r = await api(`/api/jobs/${job.id}/artifacts/curve.json`);

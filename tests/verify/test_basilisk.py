@@ -169,3 +169,36 @@ def test_without_basilisk_a_message_not_a_traceback(monkeypatch, tmp_path, capsy
     rc, out, err = run_cli(["verify", str(tmp_path), "--basilisk"], capsys)
     assert rc == 2 and out == ""
     assert err.strip() == "modsat verify --basilisk needs Basilisk: pip install -e '.[basilisk]'"
+
+
+def _files(run_dir, basilisk: bool) -> dict[str, bytes]:
+    files = {p.name: p.read_bytes() for p in run_dir.iterdir()}
+    spec = json.loads(files["spec.json"])
+    spec["evaluation"]["basilisk"] = basilisk
+    files["spec.json"] = json.dumps(spec).encode()
+    return files
+
+
+def test_a_run_that_asks_gets_verification_json(trained_run):
+    """`evaluation.basilisk`: the worker and `modsat train` add the report to the run's files."""
+    from modsat_core.verify import ARTIFACT_NAME, add_verification
+
+    files = _files(trained_run, basilisk=False)
+    assert not add_verification(files) and ARTIFACT_NAME not in files
+    files = _files(trained_run, basilisk=True)
+    assert add_verification(files)
+    report = json.loads(files[ARTIFACT_NAME])
+    assert report["available"] and report["episodes"] == 2
+    assert report["controllers"]["policy"]["max_attitude_difference_rad"] < BOUND_RAD
+
+
+def test_a_run_that_asks_without_basilisk_says_so(monkeypatch, tmp_path):
+    from modsat_core import verify as v
+
+    monkeypatch.setattr(v, "basilisk_available", lambda: False)
+    files = {"spec.json": get_preset("quick").model_copy(update={"evaluation": get_preset("quick").evaluation
+                                                                 .model_copy(update={"basilisk": True})})
+             .model_dump_json().encode()}
+    assert v.add_verification(files)
+    report = json.loads(files[v.ARTIFACT_NAME])
+    assert report == {"available": False, "reason": v.BASILISK_MISSING + " (on the machine that trained this run)"}

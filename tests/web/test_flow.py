@@ -7,6 +7,8 @@ for the actuator colour."""
 
 from __future__ import annotations
 
+import importlib.util
+import json
 import re
 import time
 
@@ -66,12 +68,16 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     page.fill("#f-training-total_env_steps", "300")  # form fields write into the JSON editor
     page.fill("#f-evaluation-episodes", "8")
     assert '"total_env_steps": 300,' in page.input_value("#overrides")
+    overrides = json.loads(page.input_value("#overrides"))  # the JSON editor: fly the slews in Basilisk too
+    overrides["evaluation"]["basilisk"] = True
+    page.fill("#overrides", json.dumps(overrides, indent=2))
     page.click("#submit-btn")
     page.wait_for_selector("#submit-ok:not([hidden])")
     job_id = int(re.search(r"#(\d+)", page.text_content("#submit-ok")).group(1))
     spec = service.client.get(f"/api/jobs/{job_id}").json()["spec"]
     assert spec["name"] == "rl-ci" and spec["training"]["total_env_steps"] == 300
     assert spec["evaluation"]["episodes"] == 8 and spec["training"]["num_envs"] == 16, "the rest is the preset"
+    assert spec["evaluation"]["basilisk"] is True
     r = service.client.post("/api/jobs", json=TINY_GA)
     assert r.status_code == 201, r.text
     RUN["ga"] = r.json()["id"]
@@ -107,7 +113,19 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     table = page.text_content("#evaluation")
     assert "PD baseline" in table and "success rate" in table and "mean return" in table
     names = page.locator("#downloads a").all_text_contents()
-    assert {"policy.pt", "policy_export.pt", "curve.json", "evaluation.viser"} <= set(names), names
+    assert {"policy.pt", "policy_export.pt", "curve.json", "evaluation.viser", "verification.json"} <= set(names), names
+    # The same slews flown in Basilisk (modsat_core/verify.py), where the worker has it.
+    page.wait_for_selector("#verification h3")
+    verification = page.text_content("#verification")
+    if importlib.util.find_spec("Basilisk") is not None:
+        heads = page.locator("#verification thead th").all_text_contents()
+        assert heads == ["", "policy", "PD baseline", "", "modsat", "Basilisk", "modsat", "Basilisk"], heads
+        assert "largest attitude difference modsat vs Basilisk" in verification
+        box = page.locator("#verification table")
+        assert box.evaluate("t => t.scrollWidth <= t.parentElement.clientWidth"), "no column is cut off at 1280 px"
+        page.locator("#verification").screenshot(path=str(shots / "job-basilisk-verification.png"))
+    else:
+        assert "needs Basilisk" in verification, verification
     page.evaluate("window.scrollTo(0, 0)")
     page.screenshot(path=str(shots / "job-list.png"))
     page.locator("#curves").screenshot(path=str(shots / "job-curves.png"))
