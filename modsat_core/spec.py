@@ -278,6 +278,15 @@ class Training(_Section):
             "of them, then narrowed. null = constant."
         ),
     )
+    design_learning_starts: int = Field(
+        0, ge=0, le=1_000_000_000,
+        description=(
+            "Env steps before the actor's design layers learn: until then the policy grows the design "
+            "it starts from (the full cube around the seed actuator, with the set network) and the "
+            "controller learns to fly it and the explored designs near it. The design critic learns "
+            "from the start. 0 = from the start (the paper)."
+        ),
+    )
     n_step: int = Field(
         1, ge=1, le=20,
         description=(

@@ -44,11 +44,14 @@ class TD3:
         self.updates = 0
 
     def update(self, obs, action: Tensor, reward: Tensor, next_obs, terminal: Tensor,
-               generator: torch.Generator, discount: Tensor | None = None) -> dict[str, float]:
+               generator: torch.Generator, discount: Tensor | None = None,
+               actor_rows: Tensor | None = None) -> dict[str, float]:
         """One TD3 step on a batch; the actor and targets move every ``policy_delay`` calls.
 
         ``discount``: per-row factor of the bootstrapped value (``gamma ** m`` for an m-step
-        return, :meth:`ReplayBuffer.sample_n_step`); default ``gamma``."""
+        return, :meth:`ReplayBuffer.sample_n_step`); default ``gamma``. ``actor_rows``: (B,)
+        bool, the rows whose actions the actor step improves (default all); the critic
+        learns from every row."""
         cfg = self.cfg
         with torch.no_grad():
             next_a = self.actor_target(next_obs)
@@ -70,7 +73,11 @@ class TD3:
             for p in self.critic.parameters():
                 p.requires_grad_(False)
             try:
-                actor_loss = -self.critic(obs, self.actor(obs))[0].mean()
+                q = self.critic(obs, self.actor(obs))[0]
+                if actor_rows is None:
+                    actor_loss = -q.mean()
+                else:  # an empty selection is a zero loss: no gradient, no step of any weight
+                    actor_loss = -(q * actor_rows.to(q.dtype)).sum() / actor_rows.sum().clamp(min=1)
                 self.actor_opt.zero_grad(set_to_none=True)
                 actor_loss.backward()
             finally:

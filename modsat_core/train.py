@@ -417,7 +417,11 @@ class TD3Run:
         obs = observe_compact(Compact.from_dict(b, "obs_"), N, D, rl)
         nxt = observe_compact(Compact.from_dict(b, "next_"), N, D, rl)
         action = b["action"].float()
-        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount)
+        # Until design_learning_starts the design layers are held: the controller learns to fly
+        # the design the policy starts from (and the explored ones near it) before it moves.
+        actor_rows = ~obs.design if self.env_steps < self.t.design_learning_starts else None
+        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount,
+                                           actor_rows)
 
     def evaluate_now(self) -> dict:
         actor = self._eval_actor()

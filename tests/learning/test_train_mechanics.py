@@ -152,3 +152,21 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
     assert all(np.array_equal(g, own) for g in grids)
     grids, own = grown(1.0)
     assert sum(not np.array_equal(g, own) for g in grids) >= len(grids) // 2
+
+
+def test_design_layers_hold_until_design_learning_starts():
+    """The set network's design layers do not move before `design_learning_starts`; the control
+    layers do; and after it the design layers learn."""
+    from modsat_core.train import TD3Run
+
+    spec = tiny_spec(training__network="set", design__repair=True, training__design_learning_starts=10**6)
+    run = TD3Run(spec)
+    before = {k: v.clone() for k, v in run.agent.actor.state_dict().items()}
+    run.run(lambda _p: None, lambda _c: None, lambda: False)
+    after = run.agent.actor.state_dict()
+    moved = {k for k in before if not torch.equal(before[k], after[k])}
+    assert moved and all(k.startswith("control.") for k in moved), sorted(moved)
+    free = TD3Run(tiny_spec(training__network="set", design__repair=True))
+    free.run(lambda _p: None, lambda _c: None, lambda: False)
+    assert any(k.startswith("design.") and not torch.equal(before[k], v)
+               for k, v in free.agent.actor.state_dict().items())
