@@ -224,12 +224,74 @@ def bench_worker_processes(url: str, *, jobs: int = 100, workers: int = 4) -> di
             "seconds": round(wall, 2), "jobs_per_s": round(jobs / wall, 1)}
 
 
+# ----------------------------------------------------------------------------- torch threads
+
+#: The `quick` preset cut to a benchmark: 1,008 env steps, learning from step 256, 8 final slews.
+THREADS_JOB = {"preset": "quick", "overrides": {
+    "training": {"total_env_steps": 1008, "learning_starts": 256, "eval_every_steps": 100_000},
+    "evaluation": {"episodes": 8}}}
+
+
+def _busy() -> None:
+    while True:
+        pass
+
+
+def bench_threads(threads: list[int], busy: int = 1) -> dict:
+    """``THREADS_JOB`` through ``modsat serve`` (SQLite, one worker) with each
+    ``MODSAT_TORCH_THREADS``, while ``busy`` other CPU-bound processes run: the job's
+    ``run_seconds`` each time (issue 13: torch's default of a thread per core was about 20x
+    slower on a busy 2-core machine)."""
+    burners = [mp.get_context("spawn").Process(target=_busy, daemon=True) for _ in range(busy)]
+    for b in burners:
+        b.start()
+    out: dict = {"job": THREADS_JOB, "busy_processes": busy, "run_seconds": {}}
+    try:
+        for n in threads:
+            with tempfile.TemporaryDirectory(prefix="modsat-bench-threads-") as tmp:
+                port = _free_port()
+                env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+                proc = subprocess.Popen(
+                    [sys.executable, "-m", "modsat_core.cli", "serve", "--workers", "1", "--port", str(port),
+                     "--no-viewer", "--data-dir", tmp], env={**env, "MODSAT_TORCH_THREADS": str(n)},
+                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+                try:
+                    c = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30)
+                    deadline = time.monotonic() + 60
+                    while True:
+                        try:
+                            if c.get("/api/health").status_code == 200:
+                                break
+                        except httpx.HTTPError:
+                            pass
+                        if time.monotonic() > deadline:
+                            raise RuntimeError("modsat serve did not start")
+                        time.sleep(0.5)
+                    job = c.post("/api/jobs", json=THREADS_JOB).json()
+                    while (j := c.get(f"/api/jobs/{job['id']}").json())["status"] not in ("succeeded", "failed"):
+                        time.sleep(2)
+                    out["run_seconds"][str(n)] = j["progress"]["run_seconds"] if j["status"] == "succeeded" else None
+                finally:
+                    os.killpg(proc.pid, 2)
+                    proc.wait(60)
+    finally:
+        for b in burners:
+            b.kill()
+    t = out["run_seconds"]
+    if "1" in t and t["1"]:
+        out["ratio_to_1_thread"] = {k: (v / t["1"] if v else None) for k, v in t.items()}
+    return out
+
+
 # ----------------------------------------------------------------------------- main
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m server.bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("what", nargs="*", help="api and/or queue (default: both)")
+    p.add_argument("what", nargs="*", help="api and/or queue (default: both), or threads")
+    p.add_argument("--threads", type=int, nargs="+", default=[1, 2],
+                   help="threads: MODSAT_TORCH_THREADS values to compare (default 1 2)")
+    p.add_argument("--busy", type=int, default=1, help="threads: other CPU-bound processes meanwhile (default 1)")
     p.add_argument("--db", nargs="+", choices=["sqlite", "postgresql"], default=["sqlite", "postgresql"])
     p.add_argument("--pg", default=os.environ.get("MODSAT_BENCH_PG_URL", DEFAULT_PG), metavar="URL",
                    help="admin URL of a PostgreSQL server (a database is created and dropped)")
@@ -240,8 +302,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="print only the JSON report")
     args = p.parse_args(argv)
     args.what = args.what or ["api", "queue"]
+    if args.what == ["threads"]:
+        if not all(1 <= n <= 256 for n in args.threads) or not 0 <= args.busy <= 64:
+            p.error("--threads from 1 to 256, --busy from 0 to 64")
+        print(json.dumps({"machine": {"cpus": os.cpu_count()}, "threads": bench_threads(args.threads, args.busy)},
+                         indent=2))
+        return 0
     if set(args.what) - {"api", "queue"}:
-        p.error("what to measure: api and/or queue")
+        p.error("what to measure: api and/or queue, or threads alone")
 
     report: dict = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                                 "platform": platform.platform()}, "results": {}}
