@@ -7,6 +7,7 @@ docs/service.md (the table there is this file, in words).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from pydantic import Field, field_validator, model_validator
@@ -21,6 +22,16 @@ DB_FILE_NAME = "modsat.db"
 def default_db_url(data_dir: Path) -> str:
     """The SQLite file of a one-machine deployment: ``<data_dir>/modsat.db``."""
     return f"sqlite:///{(Path(data_dir) / DB_FILE_NAME).resolve()}"
+
+
+def default_job_memory_gib() -> float:
+    """8 GiB, or half of this machine's memory where that is less (a job must leave room for
+    the service, the other workers and the system)."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not POSIX: the fixed default
+        return 8.0
+    return min(8.0, round(total / 2 / GIB, 1))
 
 
 class WorkerSettings(BaseSettings):
@@ -61,9 +72,10 @@ class WorkerSettings(BaseSettings):
         "threads measured about 20x slower, not faster (docs/service.md).",
     )
     max_job_memory_gib: float | None = Field(
-        8.0, gt=0, le=1 << 20,
+        default_factory=lambda: default_job_memory_gib(), gt=0, le=1 << 20,
         description="A spec whose estimated peak memory (replay buffer, update, stepping, evaluation; "
-        "modsat_core/limits.py) is larger is refused (422 at the API). Unset (empty) = no limit.",
+        "modsat_core/limits.py) is larger is refused (422 at the API). Default: 8, or half the machine's "
+        "memory if that is less. Empty = no limit.",
     )
     max_env_steps: int | None = Field(
         20_000_000, ge=1, description="Largest `training.total_env_steps` of one job. Unset = no limit."
