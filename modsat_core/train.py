@@ -16,6 +16,7 @@ from __future__ import annotations
 import copy
 import io
 import math
+import pickle
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -142,8 +143,16 @@ def policy_bytes(actor: torch.nn.Module, grid: np.ndarray | None, spec: JobSpec)
 
 
 def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpec]:
-    """Read ``policy.pt``: the actor (CPU, eval mode), its design grid and the run's spec."""
-    d = torch.load(io.BytesIO(data), map_location="cpu", weights_only=False)
+    """Read ``policy.pt``: the actor (CPU, eval mode), its design grid and the run's spec.
+
+    A policy file is downloaded and shared, so it is read with ``weights_only=True``: tensors
+    and plain data only; a pickle that would build other objects (and could run code) is
+    refused."""
+    try:
+        d = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise ValueError("not a modsat policy file: it holds objects other than tensors and plain data, which "
+                         f"are not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}") from None
     if not isinstance(d, dict) or d.get("format") != "modsat-policy":
         raise ValueError("not a modsat policy file")
     if d.get("version") != POLICY_VERSION or d.get("n_features") != N_FEATURES:

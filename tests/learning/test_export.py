@@ -52,3 +52,27 @@ def test_export_matches_in_process_policy(tmp_path, network):
     got = torch.load(tmp_path / "out.pt")
     assert got.shape == (16, 3, 3)
     torch.testing.assert_close(got, expected.float(), atol=1e-5, rtol=1e-5)
+
+
+class _Payload:
+    """A pickle that would run code when loaded: what a malicious policy.pt could hold."""
+
+    def __reduce__(self):
+        import os
+
+        return (os.system, ("touch /tmp/modsat-pwned",))
+
+
+def test_a_crafted_policy_file_is_refused_without_running_it(tmp_path):
+    import io
+    import os
+
+    from modsat_core.train import load_policy
+
+    buf = io.BytesIO()
+    torch.save({"format": "modsat-policy", "payload": _Payload()}, buf)
+    if os.path.exists("/tmp/modsat-pwned"):
+        os.remove("/tmp/modsat-pwned")
+    with pytest.raises(ValueError, match="not a modsat policy file"):
+        load_policy(buf.getvalue())
+    assert not os.path.exists("/tmp/modsat-pwned"), "the pickle's code ran"
