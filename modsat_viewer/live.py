@@ -300,7 +300,9 @@ class Session:
                     continue
                 i = e.index_at(self.t + float(e.t_s[0]))
                 sat.body.wxyz = e.q_BN[i]
-                parts.append(f"**{r.short_algorithm}** error {e.error_deg[i]:.1f} deg, rate "
+                # Side by side, each line names its run (both could be RL, or both GA).
+                who = r.short_algorithm if len(self.runs) == 1 else f"{r.short_algorithm} {r.title}"
+                parts.append(f"**{who}** error {e.error_deg[i]:.1f} deg, rate "
                              f"{e.rate_rad_s[i]:.3f} rad/s, wheels {e.wheel_momentum_Nms[i]:.4f} N m s"
                              + (" (episode over)" if self.t > e.duration_s + 1e-9 else ""))
         self.readout.content = f"t = {self.t:.2f} s  \n" + "  \n".join(parts)

@@ -467,7 +467,8 @@ function verifyView(v) {
 
 function designLine(d) {
   if (!d) return null;
-  const parts = [`${d.modules} modules`, `${d.actuators} actuators`];
+  const plural = (n, word) => `${n} ${word}${n === 1 ? "" : "s"}`;
+  const parts = [plural(d.modules, "module"), plural(d.actuators, "actuator")];
   if (d.mass_kg != null) parts.push(`${d.mass_kg.toFixed(1)} kg`);
   if (d.principal_inertia_kgm2) parts.push("principal inertia " +
     d.principal_inertia_kgm2.map((v) => v.toFixed(4)).join(", ") + " kg m\u00b2");

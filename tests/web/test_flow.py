@@ -112,6 +112,7 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     page.wait_for_selector("#evaluation table.eval")
     table = page.text_content("#evaluation")
     assert "PD baseline" in table and "success rate" in table and "mean return" in table
+    assert re.search(r"Design: \d+ modules, \d+ actuators?\b", table) and not re.search(r"\b1 actuators\b", table), table
     names = page.locator("#downloads a").all_text_contents()
     assert {"policy.pt", "policy_export.pt", "curve.json", "evaluation.viser", "verification.json"} <= set(names), names
     # The same slews flown in Basilisk (modsat_core/verify.py), where the worker has it.
@@ -204,6 +205,9 @@ def test_rl_and_ga_side_by_side(service, new_page):
     page.click("#view-live")
     frame = _open_3d(page)
     frame.get_by_text(re.compile(r"RL \(job \d+ rl-ci\) vs GA \(job \d+ ga-ci\)")).first.wait_for()
+    # The two readout lines name their runs (issue 14: both said "RL").
+    frame.get_by_text(re.compile(r"RL job \d+ rl-ci error [0-9.]+ deg")).first.wait_for()
+    frame.get_by_text(re.compile(r"GA job \d+ ga-ci error [0-9.]+ deg")).first.wait_for()
     png = _scene_shot(frame, shots / "rl-vs-ga.png")
     left, right = actuator_pixels(png, (0.0, 0.0, 0.5, 1.0)), actuator_pixels(png, (0.5, 0.0, 1.0, 1.0))
     assert left > MIN_ACTUATOR_PIXELS and right > MIN_ACTUATOR_PIXELS, f"two satellites, one each side (orange pixels {left}, {right})"
