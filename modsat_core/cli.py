@@ -294,7 +294,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     files = result.artifacts()
     add_recording(files)
     if add_verification(files):
-        print("modsat train: the evaluation slews were flown in Basilisk too: verification.json", file=sys.stderr)
+        report = json.loads(files["verification.json"])
+        print("modsat train: " + ("the evaluation slews were flown in Basilisk too: verification.json"
+                                  if report["available"] else f"no Basilisk verification: {report['reason']}"),
+              file=sys.stderr)
     for name, data in files.items():
         with open(os.path.join(out, name), "wb") as fh:
             fh.write(data)
