@@ -65,7 +65,8 @@ class Serve(HttpProc):
     group = True
     stop_timeout_s = 30.0
 
-    def __init__(self, data_dir: Path, log_path: Path, *, workers: int = 1, viewer: bool = True):
+    def __init__(self, data_dir: Path, log_path: Path, *, workers: int = 1, viewer: bool = True,
+                 env: dict[str, str] | None = None):
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         self.data_dir = data_dir
@@ -73,7 +74,8 @@ class Serve(HttpProc):
         self._log = open(log_path, "wb")  # noqa: SIM115 - closed in stop()
         cmd = [MODSAT, "serve", "--workers", str(workers), "--data-dir", str(data_dir), "--port", str(self.port)]
         cmd += ["--viewer-port", "0"] if viewer else ["--no-viewer"]
-        env = {**os.environ, "MODSAT_POLL_S": "0.2", "MODSAT_SSE_POLL_S": "0.2", "MODSAT_HEARTBEAT_S": "2"}
+        env = {**os.environ, "MODSAT_POLL_S": "0.2", "MODSAT_SSE_POLL_S": "0.2", "MODSAT_HEARTBEAT_S": "2",
+               **(env or {})}
         self.proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT,
                                      start_new_session=True)
         wait_for(self._up, 60, f"modsat serve on port {self.port}")

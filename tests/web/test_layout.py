@@ -16,7 +16,8 @@ N_JOBS = 200
 @pytest.fixture(scope="module")
 def crowded(tmp_path_factory):
     d = tmp_path_factory.mktemp("crowded")
-    s = Serve(d / "data", d / "serve.log", workers=0, viewer=False)
+    # 200 queued jobs: above the default queue cap (MODSAT_MAX_ACTIVE_JOBS, 100), raised here.
+    s = Serve(d / "data", d / "serve.log", workers=0, viewer=False, env={"MODSAT_MAX_ACTIVE_JOBS": "1000"})
     for i in range(N_JOBS):
         r = s.client.post("/api/jobs", json={"preset": "quick", "overrides": {"name": f"job-{i + 1:03d}"}})
         assert r.status_code == 201, r.text
