@@ -287,7 +287,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         print(f"stopped at {result.env_steps:,} env steps; continue with: modsat train ... --out {out} --resume",
               file=sys.stderr)
         return 130
-    from modsat_viewer.recording import add_recording  # the 3D replay, evaluation.viser (docs/viewer.md)
+    from web.recording import add_recording  # the 3D replay, evaluation.viser (docs/viewer.md)
 
     from .verify import add_verification
 

@@ -165,7 +165,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     """``modsat view RUN_DIR [RUN_DIR ...]``: the live viewer on local runs, until Ctrl-C."""
     from pathlib import Path
 
-    from modsat_viewer.live import DirRuns, ViewerApp
+    from web.live import DirRuns, ViewerApp
 
     try:
         source = DirRuns(args.run_dirs)
@@ -173,7 +173,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
         print(f"modsat view: {exc}", file=sys.stderr)
         return 2
     if args.save:
-        from modsat_viewer.recording import recording_bytes, recording_html
+        from web.recording import recording_bytes, recording_html
 
         run_dir = Path(args.run_dirs[0])
         spec = run_dir / "spec.json"

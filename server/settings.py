@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pydantic import Field, SecretStr, field_validator
 
-from modsat_viewer.origin import host_names
+from web.origin import host_names
 from worker.settings import WorkerSettings
 
 
@@ -43,7 +43,7 @@ class ServerSettings(WorkerSettings):
     max_active_jobs: int = Field(
         100, ge=1, le=1_000_000, description="Queued plus running jobs; a submission beyond it is 429."
     )
-    web_dir: str | None = Field(None, description="Directory of the web UI's files (default: the repository's web/).")
+    web_dir: str | None = Field(None, description="Directory of the web UI's files (default: web/static/, installed with the package).")
 
     @field_validator("api_token")
     @classmethod

@@ -1,6 +1,6 @@
 """The 3D viewer in the API process, and the web UI's static files.
 
-* The live viewer (modsat_viewer.live) runs in the app's lifespan, in viser's own threads,
+* The live viewer (web.live) runs in the app's lifespan, in viser's own threads,
   on ``viewer_port`` (its real port: ``GET /api/viewer``). Its runs are the job store's
   succeeded jobs (:class:`StoreRuns`).
 * ``/viser-client/`` serves viser's static client (one self-contained HTML file from the
@@ -19,13 +19,15 @@ from fastapi import APIRouter, FastAPI, Request
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
-from modsat_viewer.run import RunData
+import web
+from web.run import RunData
 
 from .settings import ServerSettings
 
 log = logging.getLogger("modsat.server")
 
-REPO_WEB_DIR = Path(__file__).resolve().parents[1] / "web"
+#: The page, scripts and styles of the web UI (package data of ``web``).
+WEB_STATIC_DIR = Path(web.__file__).resolve().parent / "static"
 #: Artefacts a job needs to be shown in 3D.
 NEEDED = ("design.json", "trajectories.json")
 
@@ -69,7 +71,7 @@ def start_viewer(settings: ServerSettings, store):
     """The live viewer on ``settings.viewer_port``, or None when it is disabled or cannot start."""
     if not settings.viewer:
         return None
-    from modsat_viewer.live import ViewerApp
+    from web.live import ViewerApp
 
     try:
         app = ViewerApp(StoreRuns(store), host=settings.host, port=settings.viewer_port,
@@ -95,7 +97,7 @@ def viewer_router() -> APIRouter:
     def viewer_info(request: Request) -> ViewerInfo:
         """Where the live 3D viewer listens. Open `/viser-client/?websocket=ws://HOST:PORT/?run=JOB_ID`
         (or `http://HOST:PORT/`); a recording plays at `/viser-client/?playbackPath=URL`."""
-        from modsat_viewer.recording import RECORDING_NAME
+        from web.recording import RECORDING_NAME
 
         v = getattr(request.app.state, "viewer", None)
         return ViewerInfo(enabled=v is not None, port=v.port if v is not None else None, client="/viser-client/",
@@ -110,7 +112,7 @@ def mount_static(app: FastAPI, settings: ServerSettings) -> None:
 
     client_dir = Path(viser.__file__).resolve().parent / "client" / "build"
     app.mount("/viser-client", StaticFiles(directory=client_dir, html=True), name="viser-client")
-    web = Path(settings.web_dir) if settings.web_dir else REPO_WEB_DIR
+    web = Path(settings.web_dir) if settings.web_dir else WEB_STATIC_DIR
     if web.is_dir():
         app.mount("/", StaticFiles(directory=web, html=True), name="web")
     else:

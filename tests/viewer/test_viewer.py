@@ -1,4 +1,4 @@
-"""modsat_viewer without a browser: geometry, colours, run parsing, the recording, and the
+"""web (the viewer) without a browser: geometry, colours, run parsing, the recording, and the
 live viewer's sessions driven through viser's own API."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from modsat_viewer.recording import RECORDING_NAME, add_recording, recording_bytes, recording_html
-from modsat_viewer.run import Episode, RunData
-from modsat_viewer.scene import ACTUATOR_SRGB, Voxels, side_by_side_positions, srgb_to_linear
+from web.recording import RECORDING_NAME, add_recording, recording_bytes, recording_html
+from web.run import Episode, RunData
+from web.scene import ACTUATOR_SRGB, Voxels, side_by_side_positions, srgb_to_linear
 
 GRID = [[[1, 2, 0], [0, 1, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, 0], [0, 0, 0]]]
 
@@ -91,7 +91,7 @@ def test_recording_is_a_viser_file_of_the_slews():
 
 def test_live_viewer_sessions(tmp_path):
     """Sessions built as for a browser tab (viser's ClientHandle API), driven from Python."""
-    from modsat_viewer.live import DirRuns, Session, ViewerApp
+    from web.live import DirRuns, Session, ViewerApp
 
     for name in ("a", "b"):
         d = tmp_path / name
@@ -125,8 +125,8 @@ def test_live_viewer_refuses_tabs_of_other_sites(tmp_path):
     page, on another port of localhost, does (tests/web drive that one in a real browser)."""
     from types import SimpleNamespace
 
-    from modsat_viewer.live import DirRuns, ViewerApp
-    from modsat_viewer.origin import host_names, origin_allowed
+    from web.live import DirRuns, ViewerApp
+    from web.origin import host_names, origin_allowed
 
     d = tmp_path / "a"
     d.mkdir()

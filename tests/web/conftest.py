@@ -29,7 +29,7 @@ CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic
 DESKTOP = {"width": 1280, "height": 800}
 PHONE = {"width": 390, "height": 844}
 
-#: The `quick` preset's actuator colour (modsat_viewer.scene.ACTUATOR_SRGB), as an HSV test below.
+#: The `quick` preset's actuator colour (web.scene.ACTUATOR_SRGB), as an HSV test below.
 ACTUATOR_HUE_DEG = (15.0, 45.0)
 
 
