@@ -16,8 +16,9 @@ const state = {
   schema: null, presetSpec: null,
   viewer: null,
   listStreams: new Map(), // job id -> EventSource
-  selected: null, job: null, detailStream: null, evalPoints: [], curveFromFile: null,
+  selected: null, job: null, detailStream: null, evalPoints: [], curveFromFile: null, reference: null,
   view: null, compare: "",
+  designs: new Map(), // job id -> design.json's grid (null: none), kept: a finished job's design never changes
 };
 
 // ------------------------------------------------------------------ helpers
@@ -63,6 +64,15 @@ const fmt = {
   pct: (v) => (v == null ? "-" : (100 * v).toFixed(0) + " %"),
   num: (d) => (v) => (v == null || !Number.isFinite(v) ? "-" : v.toFixed(d)),
   bytes: (n) => (n < 1024 ? n + " B" : n < 1048576 ? (n / 1024).toFixed(1) + " KiB" : (n / 1048576).toFixed(1) + " MiB"),
+  // 62 s, 4 min 30 s, 2 h 05 min
+  dur: (s) => {
+    if (s == null || !Number.isFinite(s)) return "-";
+    s = Math.max(0, Math.round(s));
+    if (s < 90) return s + " s";
+    if (s < 3600) return `${Math.floor(s / 60)} min` + (s % 60 ? ` ${s % 60} s` : "");
+    const m = Math.round(s / 60);
+    return `${Math.floor(m / 60)} h ${String(m % 60).padStart(2, "0")} min`;
+  },
 };
 
 function getPath(obj, path) {
@@ -109,6 +119,32 @@ function statusBadge(job) {
   return el("span", { class: "badge " + job.status, text: s });
 }
 
+// The picture of a finished job's satellite, from its design.json (fetched once per job).
+function thumbFor(job) {
+  const grid = state.designs.get(String(job.id));
+  const svg = grid ? window.modsatCharts.designThumb(grid) : null;
+  return svg || el("span", { class: "thumb-none", "aria-hidden": "true" });
+}
+
+async function loadThumbs(items) {
+  const want = items.filter((j) => j.status === "succeeded" && !state.designs.has(String(j.id)));
+  await Promise.all(want.map(async (j) => {
+    const id = String(j.id);
+    state.designs.set(id, null); // asked for: not again
+    const r = await api(`/api/jobs/${id}/artifacts/design.json`);
+    const grid = r.ok && r.body && Array.isArray(r.body.grid) ? r.body.grid : null;
+    state.designs.set(id, grid);
+    const cell = document.querySelector(`#job-${id} .name-wrap`);
+    if (grid && cell) cell.firstChild.replaceWith(thumbFor(j));
+  }));
+}
+
+function nameCell(j) {
+  return el("td", { class: "name" }, el("div", { class: "name-wrap" }, thumbFor(j),
+    el("div", { class: "name-text" }, el("span", { class: "job-name", title: j.name || "", text: j.name || "(no name)" }),
+      el("span", { class: "algo", text: j.algorithm }))));
+}
+
 function renderRows(items) {
   const rows = $("job-rows");
   rows.replaceChildren();
@@ -116,9 +152,8 @@ function renderRows(items) {
     const ret = j.last_eval && j.last_eval.mean_return != null ? j.last_eval.mean_return.toFixed(1) : "";
     const tr = el("tr", { id: "job-" + j.id, tabindex: "0", "data-id": j.id,
       class: String(j.id) === String(state.selected) ? "selected" : null },
-      el("td", { class: "num", text: j.id }), el("td", { text: j.name || "" }),
-      el("td", { class: "opt", text: j.algorithm }), el("td", {}, statusBadge(j)),
-      el("td", {}, progressCell(j)), el("td", { class: "opt num", text: ret }));
+      el("td", { class: "num", text: j.id }), nameCell(j), el("td", { class: "status" }, statusBadge(j)),
+      el("td", { class: "prog" }, progressCell(j)), el("td", { class: "opt num ret", text: ret }));
     const open = () => selectJob(j.id).then(() => {
       if (window.innerWidth <= 900) $("detail").scrollIntoView({ block: "start" }); // one column: show it
     });
@@ -126,7 +161,8 @@ function renderRows(items) {
     tr.addEventListener("keydown", (e) => { if (e.key === "Enter") open(); });
     rows.append(tr);
   }
-  if (!items.length) rows.append(el("tr", {}, el("td", { colspan: "6", class: "hint", text: "no jobs" })));
+  if (!items.length) rows.append(el("tr", {}, el("td", { colspan: "5", class: "hint", text: "no jobs" })));
+  loadThumbs(items);
 }
 
 async function loadJobs() {
@@ -154,10 +190,10 @@ async function loadJobs() {
 function updateRow(id, fields) {
   const tr = $("job-" + id);
   if (!tr) return;
-  if (fields.progress) tr.children[4].replaceChildren(progressCell(fields));
-  if (fields.status) tr.children[3].replaceChildren(statusBadge(fields));
+  if (fields.progress) tr.querySelector("td.prog").replaceChildren(progressCell(fields));
+  if (fields.status) tr.querySelector("td.status").replaceChildren(statusBadge(fields));
   if (fields.last_eval && fields.last_eval.mean_return != null) {
-    tr.children[5].textContent = fields.last_eval.mean_return.toFixed(1);
+    tr.querySelector("td.ret").textContent = fields.last_eval.mean_return.toFixed(1);
   }
 }
 
@@ -382,6 +418,7 @@ function renderHead(job) {
     (job.attempt > 1 ? `, attempt ${job.attempt}` : "");
   $("cancel-btn").hidden = TERMINAL.has(job.status);
   renderProgress(job.progress, job.latest_metrics);
+  renderAttempts(job);
   const err = $("d-error");
   err.hidden = !job.error;
   err.textContent = job.error || "";
@@ -389,26 +426,88 @@ function renderHead(job) {
     el("pre", { text: job.error_detail })));
 }
 
+// Seconds each attempt ran, from the job's attempts (server times). One still running counts
+// up to `now` (the newest progress report's time, else the clock here).
+function attemptSeconds(job, now) {
+  return (job.attempts || []).map((a) => {
+    const t0 = Date.parse(a.started_at);
+    const t1 = a.ended_at ? Date.parse(a.ended_at) : a.outcome === "running" ? Math.max(t0, now || Date.now()) : t0;
+    return (t1 - t0) / 1000;
+  });
+}
+
 function renderProgress(p, m) {
   $("d-bar").style.width = `${Math.round(100 * p.fraction)}%`;
   const parts = [`${fmt.int(p.env_steps)} / ${fmt.int(p.total_env_steps)} env steps`,
     `${Math.round(100 * p.fraction)} %`];
   if (p.phase) parts.push(p.phase);
-  if (m && m.elapsed_s != null) parts.push(`${m.elapsed_s.toFixed(0)} s`);
+  const job = state.job, n = job && job.attempts ? job.attempts.length : 0;
+  if (n > 1) {
+    // The training's elapsed_s leaves out attempts that ended without reporting (a lost lease):
+    // the total here is every attempt's wall time.
+    const total = attemptSeconds(job, m && m.time ? Date.parse(m.time) : null).reduce((a, b) => a + b, 0);
+    parts.push(`${fmt.dur(total)} over ${n} attempts`);
+  } else if (m && m.elapsed_s != null) {
+    parts.push(fmt.dur(m.elapsed_s));
+  }
   $("d-progress").textContent = parts.join(" \u00b7 ");
+}
+
+// One line per job that needed more than one attempt: how long each ran and how it ended.
+function renderAttempts(job) {
+  const box = $("d-attempts"), list = job.attempts || [];
+  box.hidden = list.length < 2;
+  const secs = attemptSeconds(job, job.latest_metrics && Date.parse(job.latest_metrics.time));
+  box.textContent = list.length < 2 ? "" : list.map((a, i) =>
+    `attempt ${a.attempt}: ${fmt.dur(secs[i])}, ${a.outcome}` +
+    (a.resumed_from_env_steps ? ` (resumed at ${fmt.int(a.resumed_from_env_steps)} env steps)` : "")).join(" \u00b7 ");
+}
+
+const TOL_KEY = /^success_rate_at_(.+)_deg$/;
+const TOL_COLORS = ["#17becf", "#9467bd", "#8c564b"];
+const PD_COLOR = "#5b6575";
+
+// The PD baseline's figures on the job's design (evaluation.json), drawn as reference lines.
+function referenceFrom(ev, job) {
+  const pd = ev && ev.pd_baseline && ev.pd_baseline.summary;
+  if (!pd) return null;
+  const tol = job && job.spec && job.spec.mission ? job.spec.mission.tolerance_deg : null;
+  return { pd, tol, episodes: ev.episodes };
 }
 
 function drawCurves() {
   const pts = state.curveFromFile || state.evalPoints;
   const box = $("curves");
+  const ref = state.reference, pd = ref && ref.pd;
+  const tol = ref ? ref.tol : state.job && state.job.spec && state.job.spec.mission && state.job.spec.mission.tolerance_deg;
+  const tolText = (t) => `${+Number(t).toFixed(3)} deg`;
   const ret = pts.map((p) => [p.env_steps, p.mean_return]);
-  const succ = pts.map((p) => [p.env_steps, 100 * (p.success_rate ?? 0)]);
+  const retRefs = pd ? [{ name: `PD baseline, same design: ${pd.mean_return.toFixed(1)}`, value: pd.mean_return,
+    color: PD_COLOR }] : [];
+  // The curve points hold the success rate at the mission's tolerance; other tolerances only
+  // where a point has them (success_rate_at_<t>_deg). The PD baseline's, from the final
+  // evaluation, at each tolerance it was scored at.
+  const succ = [{ name: `policy${tol ? ", within " + tolText(tol) : ""}`, color: "#2ca02c",
+    points: pts.map((p) => [p.env_steps, 100 * (p.success_rate ?? 0)]) }];
+  const extra = [...new Set(pts.flatMap((p) => Object.keys(p).filter((k) => TOL_KEY.test(k))))];
+  extra.filter((k) => tol == null || Number(k.match(TOL_KEY)[1]) !== tol).forEach((k, i) => succ.push({
+    name: `policy, within ${tolText(k.match(TOL_KEY)[1])}`, color: TOL_COLORS[i % TOL_COLORS.length],
+    points: pts.filter((p) => p[k] != null).map((p) => [p.env_steps, 100 * p[k]]) }));
+  const succRefs = [];
+  if (pd) {
+    succRefs.push({ name: `PD baseline${tol ? ", within " + tolText(tol) : ""}: ${fmt.pct(pd.success_rate)}`,
+      value: 100 * pd.success_rate, color: PD_COLOR });
+    Object.keys(pd).filter((k) => TOL_KEY.test(k) && Number(k.match(TOL_KEY)[1]) !== tol).forEach((k) =>
+      succRefs.push({ name: `PD baseline, within ${tolText(k.match(TOL_KEY)[1])}: ${fmt.pct(pd[k])}`,
+        value: 100 * pd[k], color: PD_COLOR, dash: "2 3" }));
+  }
   box.replaceChildren(
-    window.modsatCharts.lineChart([{ name: "return", color: "#1f77b4", points: ret }],
-      { title: "mean evaluation return", xLabel: "environment steps", yLabel: "return" }),
-    window.modsatCharts.lineChart([{ name: "success", color: "#2ca02c", points: succ }],
-      { title: "success rate", xLabel: "environment steps", yLabel: "%", yMin: 0, yMax: 100 }));
+    window.modsatCharts.lineChart([{ name: "policy", color: "#1f77b4", points: ret }],
+      { title: "mean evaluation return", xLabel: "environment steps", yLabel: "return", refs: retRefs }),
+    window.modsatCharts.lineChart(succ,
+      { title: "success rate", xLabel: "environment steps", yLabel: "%", yMin: 0, yMax: 100, refs: succRefs }));
   box.dataset.points = String(pts.length);
+  box.dataset.reference = pd ? "pd" : "";
 }
 
 function evalTable(ev) {
@@ -473,7 +572,10 @@ function designLine(d) {
   if (d.principal_inertia_kgm2) parts.push("principal inertia " +
     d.principal_inertia_kgm2.map((v) => v.toFixed(4)).join(", ") + " kg m\u00b2");
   if (d.valid === false) parts.push("not a valid satellite");
-  return el("p", { class: "hint", text: "Design: " + parts.join(", ") });
+  const grid = state.designs.get(String(state.selected));
+  const pic = grid ? window.modsatCharts.designThumb(grid) : null;
+  const line = el("p", { class: "hint", text: "Design: " + parts.join(", ") });
+  return pic ? el("div", { class: "design-pic" }, pic, line) : line;
 }
 
 async function renderFiles(job, files) {
@@ -495,8 +597,13 @@ async function renderFiles(job, files) {
       + "Recording: the stored replay of the evaluation slews (policy beside the PD baseline).";
 
   const evBox = $("evaluation");
+  if (names.has("design.json") && !state.designs.get(String(job.id))) {
+    const r = await api(`/api/jobs/${job.id}/artifacts/design.json`);
+    if (r.ok && r.body && Array.isArray(r.body.grid)) state.designs.set(String(job.id), r.body.grid);
+  }
   if (names.has("evaluation.json")) {
     const r = await api(`/api/jobs/${job.id}/artifacts/evaluation.json`);
+    if (r.ok) state.reference = referenceFrom(r.body, job);
     evBox.replaceChildren(...(r.ok ? [designLine(job.evaluation && job.evaluation.design), evalTable(r.body)]
       : [el("p", { class: "errors", text: errorText(r) })]).filter(Boolean));
   } else {
@@ -568,6 +675,7 @@ async function selectJob(id, view) {
   if (changed) {
     state.evalPoints = [];
     state.curveFromFile = null;
+    state.reference = null;
     if (view === undefined) state.view = null;
   }
   if (view !== undefined) state.view = view;
@@ -636,6 +744,11 @@ async function main() {
   $("compare").addEventListener("change", (e) => {
     state.compare = e.target.value;
     if (state.view === "live") showView("live"); else writeHash();
+  });
+
+  window.addEventListener("hashchange", () => {  // a link to another job (#job=ID), or the address edited
+    const h = readHash();
+    if (h.job && h.job !== String(state.selected)) { state.compare = h.compare; selectJob(h.job, h.view || null); }
   });
 
   const v = await api("/api/viewer");

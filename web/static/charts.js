@@ -1,4 +1,5 @@
-// Line charts as inline SVG (no library, no CDN): used for the learning curves.
+// Inline SVG drawings (no library, no CDN, no WebGL): line charts for the learning curves, and
+// the small isometric picture of a satellite's design in the job list.
 "use strict";
 
 const SVG_NS = "http://www.w3.org/2000/svg";
@@ -28,9 +29,13 @@ function fmtTick(v) {
   return String(+v.toFixed(2));
 }
 
-// series: [{name, color, points: [[x, y], ...]}]; opts: {title, xLabel, yLabel, yMin, yMax}
+// series: [{name, color, points: [[x, y], ...]}]; opts: {title, xLabel, yLabel, yMin, yMax, refs}
+// refs: [{name, value, color, dash}]: horizontal reference lines (e.g. the PD baseline) across
+// the plot, inside the y range, each named in the legend under the plot.
 function lineChart(series, opts) {
-  const W = 460, H = 240, m = { l: 56, r: 12, t: 26, b: 40 };
+  const refs = (opts.refs || []).filter((r) => Number.isFinite(r.value));
+  const legend = [...(series.length > 1 || refs.length ? series : []), ...refs];
+  const W = 460, m = { l: 56, r: 12, t: 26, b: 40 + (legend.length ? 6 + 16 * legend.length : 0) }, H = 200 + m.b;
   const svg = svgEl("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart", role: "img",
     "aria-label": opts.title || "chart" });
   const pts = series.flatMap((s) => s.points).filter((p) => Number.isFinite(p[0]) && Number.isFinite(p[1]));
@@ -41,10 +46,16 @@ function lineChart(series, opts) {
     return svg;
   }
   let x0 = Math.min(...pts.map((p) => p[0])), x1 = Math.max(...pts.map((p) => p[0]));
-  let y0 = opts.yMin ?? Math.min(...pts.map((p) => p[1])), y1 = opts.yMax ?? Math.max(...pts.map((p) => p[1]));
+  const ys = [...pts.map((p) => p[1]), ...refs.map((r) => r.value)];
+  let y0 = opts.yMin ?? Math.min(...ys), y1 = opts.yMax ?? Math.max(...ys);
   if (x1 <= x0) { x0 -= 1; x1 += 1; }
   if (y1 <= y0) { y0 -= 1; y1 += 1; }
   const yt = niceTicks(y0, y1, 4), xt = niceTicks(x0, x1, 5);
+  if (yt.length > 1) {  // a free axis ends on ticks outside the data: no line on the frame's edge
+    const step = yt[1] - yt[0];
+    if (opts.yMax == null && yt[yt.length - 1] < y1 - step * 1e-9) yt.push(+(yt[yt.length - 1] + step).toPrecision(12));
+    if (opts.yMin == null && yt[0] > y0 + step * 1e-9) yt.unshift(+(yt[0] - step).toPrecision(12));
+  }
   y0 = Math.min(y0, yt[0]); y1 = Math.max(y1, yt[yt.length - 1]);
   const X = (x) => m.l + (x - x0) / (x1 - x0) * (W - m.l - m.r);
   const Y = (y) => H - m.b - (y - y0) / (y1 - y0) * (H - m.t - m.b);
@@ -59,22 +70,80 @@ function lineChart(series, opts) {
   }
   svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, class: "axis" }));
   svg.appendChild(svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, class: "axis" }));
-  svg.appendChild(svgEl("text", { x: (m.l + W - m.r) / 2, y: H - 6, "text-anchor": "middle", class: "label" },
+  const xLabelY = H - m.b + 34;
+  svg.appendChild(svgEl("text", { x: (m.l + W - m.r) / 2, y: xLabelY, "text-anchor": "middle", class: "label" },
     opts.xLabel || ""));
   svg.appendChild(svgEl("text", { x: 12, y: (m.t + H - m.b) / 2, "text-anchor": "middle", class: "label",
     transform: `rotate(-90 12 ${(m.t + H - m.b) / 2})` }, opts.yLabel || ""));
-  series.forEach((s, i) => {
+  for (const r of refs) {  // under the curves
+    svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(r.value), y2: Y(r.value), class: "ref",
+      stroke: r.color, "stroke-dasharray": r.dash || "6 4", "data-value": r.value, "data-name": r.name }));
+  }
+  series.forEach((s) => {
     const p = s.points.filter((q) => Number.isFinite(q[0]) && Number.isFinite(q[1]));
     if (!p.length) return;
     const d = p.map((q, j) => `${j ? "L" : "M"}${X(q[0]).toFixed(1)},${Y(q[1]).toFixed(1)}`).join("");
-    svg.appendChild(svgEl("path", { d, fill: "none", stroke: s.color, "stroke-width": 2 }));
+    svg.appendChild(svgEl("path", { d, fill: "none", stroke: s.color, "stroke-width": 2, class: "series",
+      "data-name": s.name }));
     for (const q of p) svg.appendChild(svgEl("circle", { cx: X(q[0]), cy: Y(q[1]), r: 2.5, fill: s.color }));
-    if (series.length > 1) {
-      svg.appendChild(svgEl("text", { x: W - m.r - 4, y: m.t + 12 + 14 * i, "text-anchor": "end",
-        class: "legend", fill: s.color }, s.name));
-    }
+  });
+  legend.forEach((s, i) => {  // a sample of the line, then its name
+    const y = xLabelY + 8 + 16 * (i + 1) - 4;
+    svg.appendChild(svgEl("line", { x1: m.l, x2: m.l + 24, y1: y - 4, y2: y - 4, stroke: s.color,
+      "stroke-width": "value" in s ? 1.5 : 2, "stroke-dasharray": "value" in s ? (s.dash || "6 4") : "none" }));
+    svg.appendChild(svgEl("text", { x: m.l + 30, y, class: "legend", fill: "#3b4453" }, s.name));
   });
   return svg;
 }
 
-window.modsatCharts = { lineChart, niceTicks };
+// A voxel design (grid[x][y][z]: 0 empty, 1 structure, 2 actuator) drawn isometric as inline SVG.
+// Only the three faces turned to the viewer are drawn, back to front. Structure is translucent
+// glass and its faces between two structure cells are left out, so an actuator inside a full
+// cube still shows in its orange through one pane (the 3D view does the same).
+const THUMB_COLORS = {
+  1: ["#c9ced6", "#a7aeb9", "#8c94a1"],  // structure: top, +x, +y faces
+  2: ["#ffa54f", "#ff7f0e", "#d9650a"],  // actuator (web.scene's orange)
+};
+
+function designThumb(grid, opts) {
+  const n = grid.length, c = Math.cos(Math.PI / 6);
+  const P = (x, y, z) => [(x - y) * c, (x + y) * 0.5 - z];
+  const at = (x, y, z) => (x < n && y < grid[x].length && z < grid[x][y].length ? grid[x][y][z] : 0);
+  const cells = [];
+  for (let x = 0; x < n; x++) for (let y = 0; y < grid[x].length; y++) for (let z = 0; z < grid[x][y].length; z++) {
+    if (grid[x][y][z]) cells.push([x, y, z, grid[x][y][z]]);
+  }
+  cells.sort((a, b) => (a[0] + a[1] + a[2]) - (b[0] + b[1] + b[2]) || a[2] - b[2]);
+  const faces = [], all = [];
+  let act = 0, str = 0;
+  for (const [x, y, z, t] of cells) {
+    if (t === 2) act++; else str++;
+    const quads = [  // [neighbour, corners]
+      [at(x, y, z + 1), [P(x, y, z + 1), P(x + 1, y, z + 1), P(x + 1, y + 1, z + 1), P(x, y + 1, z + 1)]],
+      [at(x + 1, y, z), [P(x + 1, y, z), P(x + 1, y + 1, z), P(x + 1, y + 1, z + 1), P(x + 1, y, z + 1)]],
+      [at(x, y + 1, z), [P(x, y + 1, z), P(x + 1, y + 1, z), P(x + 1, y + 1, z + 1), P(x, y + 1, z + 1)]],
+    ];
+    quads.forEach(([nb, q], i) => {
+      if (t !== 2 && nb === 1) return;  // glass against glass: no inner pane
+      all.push(...q);
+      faces.push([q, THUMB_COLORS[t === 2 ? 2 : 1][i], t === 2 ? "a" : "s"]);
+    });
+  }
+  const label = `design: ${str} structure, ${act} actuator${act === 1 ? "" : "s"}`;
+  if (!faces.length) return null;
+  const xs = all.map((p) => p[0]), ys = all.map((p) => p[1]);
+  const x0 = Math.min(...xs), y0 = Math.min(...ys);
+  const span = Math.max(Math.max(...xs) - x0, Math.max(...ys) - y0) || 1, pad = span * 0.04;
+  const k = 100 / (span + 2 * pad);  // to a 100 x 100 view box, centred
+  const ox = (100 - (Math.max(...xs) - x0) * k) / 2, oy = (100 - (Math.max(...ys) - y0) * k) / 2;
+  const svg = svgEl("svg", { viewBox: "0 0 100 100", class: "thumb " + ((opts && opts.class) || ""),
+    role: "img", "aria-label": label, "data-actuators": act, "data-structure": str });
+  svg.appendChild(svgEl("title", {}, label));
+  for (const [q, fill, cls] of faces) {
+    const pts = q.map((p) => `${(ox + (p[0] - x0) * k).toFixed(2)},${(oy + (p[1] - y0) * k).toFixed(2)}`).join(" ");
+    svg.appendChild(svgEl("polygon", { points: pts, fill, class: cls }));
+  }
+  return svg;
+}
+
+window.modsatCharts = { lineChart, niceTicks, designThumb };
