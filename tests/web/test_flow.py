@@ -110,6 +110,16 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     # The table comes from its own fetch, after the file list: the curves (drawn live from the
     # progress events already) say nothing about it.
     page.wait_for_selector("#evaluation table.eval")
+    # The PD baseline (evaluation.json) as a reference line on the return curve, and the run's
+    # satellite drawn from its design.json in the list and beside the figures (issue 14).
+    page.wait_for_function("document.querySelector('#curves').dataset.reference === 'pd'")
+    pd_return = service.client.get(f"/api/jobs/{job_id}/artifacts/evaluation.json").json()["pd_baseline"]["summary"]
+    line = page.locator("#curves svg.chart").first.locator("line.ref")
+    assert line.count() == 1 and abs(float(line.get_attribute("data-value")) - pd_return["mean_return"]) < 1e-9
+    design = service.client.get(f"/api/jobs/{job_id}/artifacts/design.json").json()
+    thumb = page.wait_for_selector(f"#job-{job_id} svg.thumb")
+    assert thumb.get_attribute("data-actuators") == str(design["actuators"])
+    assert page.locator("#evaluation .design-pic svg.thumb").count() == 1
     table = page.text_content("#evaluation")
     assert "PD baseline" in table and "success rate" in table and "mean return" in table
     assert re.search(r"Design: \d+ modules, \d+ actuators?\b", table) and not re.search(r"\b1 actuators\b", table), table
