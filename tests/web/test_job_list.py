@@ -117,7 +117,8 @@ def jobs(tmp_path_factory):
     j.complete(c, CUBE, elapsed_s=62.0)
     con = sqlite3.connect(s.data_dir / "modsat.db")
     with con:
-        t0 = con.execute("select started_at from modsat_attempts where job_id = ? and attempt = 1", (jid,)).fetchone()[0]
+        t0 = con.execute("select started_at from modsat_attempts where job_id = ? and attempt = 1",
+                         (jid,)).fetchone()[0]
         con.execute("update modsat_attempts set started_at = ?, ended_at = ? where job_id = ? and attempt = 1",
                     (t0, t0 + 208.0, jid))
         con.execute("update modsat_attempts set started_at = ?, ended_at = ? where job_id = ? and attempt = 2",
