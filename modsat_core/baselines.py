@@ -12,10 +12,11 @@ import torch
 
 from .codesign_env import effective_invalid_penalty
 from .ga import random_design
-from .morphology import ACTUATOR, EMPTY, is_valid
+from .grid import ACTUATOR, EMPTY, is_valid
 from .policy import design_with
+from .policy_file import new_actor
+from .reports import REPORT_TOLERANCES_DEG, evaluate_design
 from .spec import JobSpec
-from .train import REPORT_TOLERANCES_DEG, evaluate_design, new_actor
 
 MAX_DRAWS = 10_000
 

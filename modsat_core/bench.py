@@ -103,7 +103,7 @@ def bench_sim(batch_sizes=(1, 256, 4096), min_seconds: float = 2.0, dtype: str =
         sim = SlewSim.from_designs([design] * B, mission, modules, dtype=torch_dtype)
         sim.reset(list(range(B)), [draw] * B)
         action = torch.full((B, sim.K, 3), 0.01, dtype=torch_dtype)
-        n, el = _rate(lambda: sim.step(action), min_seconds)
+        n, el = _rate(lambda sim=sim, action=action: sim.step(action), min_seconds)
         results[f"torch_{B}"] = {"batch": B, "control_steps_per_s": B * n / el}
     base = results["numpy_1"]["control_steps_per_s"]
     for r in results.values():

@@ -27,8 +27,8 @@ from torch import Tensor
 from .envs import reference_design
 from .evaluate import monte_carlo
 from .features import control_globals
+from .flat_networks import MLPActor, MLPCritic
 from .mission import draw_episode
-from .networks import MLPActor, MLPCritic
 from .pd import PDController
 from .slew import Design, SlewSim
 from .spec import JobSpec
@@ -115,7 +115,8 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
             next_eval += eval_every
     if not curve or curve[-1]["env_steps"] != steps:
         evaluate()
-    pd = monte_carlo(design, PDController, m, spec.modules, episodes=spec.evaluation.episodes, seed=spec.evaluation.seed)
+    pd = monte_carlo(design, PDController, m, spec.modules, episodes=spec.evaluation.episodes,
+                     seed=spec.evaluation.seed)
     best = max(curve, key=lambda p: p["mean_return"])
     return {"benchmark": "control", "design": grid.tolist(), "hidden_sizes": hidden, "seed": spec.seed,
             "wall_s": round(time.monotonic() - t0, 1), "env_steps": steps, "updates": agent.updates,

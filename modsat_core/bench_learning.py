@@ -56,7 +56,8 @@ def run_one(spec: JobSpec, out_dir: str | None = None, log=None) -> dict:
     return {
         "seed": spec.seed, "algorithm": spec.algorithm, "wall_s": round(wall, 1), "env_steps": res.env_steps,
         # A GA run's updates are per inner controller, not one count: not reported.
-        "updates": last.get("updates") if spec.algorithm != "ga" else None, "env_steps_per_s": round(res.env_steps / wall, 1),
+        "updates": last.get("updates") if spec.algorithm != "ga" else None,
+        "env_steps_per_s": round(res.env_steps / wall, 1),
         "design": s["design"], "designs_evaluated": s.get("designs_evaluated"),
         "policy": _pick(s["policy"]), "pd_baseline": _pick(s["pd_baseline"]),
     }
@@ -66,7 +67,7 @@ def _stats(values: list[float]) -> dict:
     a = np.asarray([v for v in values if v is not None], dtype=float)
     if len(a) == 0:
         return {"mean": None, "std": None, "n": 0}
-    return {"mean": float(a.mean()), "std": float(a.std(ddof=1)) if len(a) > 1 else 0.0, "n": int(len(a))}
+    return {"mean": float(a.mean()), "std": float(a.std(ddof=1)) if len(a) > 1 else 0.0, "n": len(a)}
 
 
 def _environment() -> dict:

@@ -25,8 +25,9 @@ import torch
 
 from .codesign_env import Compact, observe_compact
 from .features import N_CONTROL_GLOBAL, N_FEATURES
-from .morphology import ACTUATOR
-from .networks import NETWORKS, MLPActor, MLPCritic, make_actor, make_critic
+from .flat_networks import MLPActor, MLPCritic
+from .grid import ACTUATOR
+from .networks import NETWORKS, make_actor, make_critic
 from .td3 import TD3, TD3Config
 
 
@@ -70,7 +71,7 @@ def bench_update(grids: tuple[int, ...] = (3, 5), hidden: tuple[int, ...] = (256
     for N in grids:
         cases = _cases(N, list(hidden), batch, gen)
         times: dict[str, list[float]] = {k: [] for k in cases}
-        for name, (agent, *args) in cases.items():  # warm-up: first calls allocate
+        for agent, *args in cases.values():  # warm-up: first calls allocate
             for _ in range(2):
                 agent.update(*args, generator=gen)
         for _ in range(rounds):

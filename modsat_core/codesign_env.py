@@ -22,8 +22,13 @@ import torch
 from torch import Tensor
 
 from .features import CellObs, PhysState, cell_observation
+from .grid import ACTUATOR
 from .mission import draw_episode, return_bounds
-from .morphology import ACTUATOR, mass_properties_batched, seed_component_batched, valid_mask_batched
+from .morphology import (
+    mass_properties_batched,
+    seed_component_batched,
+    valid_mask_batched,
+)
 from .slew import SlewSim
 from .spec import JobSpec
 

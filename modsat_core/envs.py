@@ -27,8 +27,8 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 
+from .grid import ACTUATOR, STRUCTURE
 from .mission import draw_episode
-from .morphology import ACTUATOR, STRUCTURE
 from .slew import Design, SlewSim
 from .spec import JobSpec, parse_spec
 
@@ -51,7 +51,7 @@ def _resolve(spec: JobSpec | dict | None, design) -> tuple[JobSpec, Design]:
         design = spec.design.fixed_design
     if design is None:
         design = reference_design(spec.design.grid_size)
-    from .morphology import validity_problem
+    from .grid import validity_problem
 
     problem = validity_problem(design)
     if problem:

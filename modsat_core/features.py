@@ -33,8 +33,9 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from .grid import ACTUATOR, EMPTY
 from .mission import error_quaternion
-from .morphology import ACTUATOR, EMPTY, mass_properties_batched, valid_mask_batched
+from .morphology import mass_properties_batched, valid_mask_batched
 
 N_COMMON, N_DESIGN, N_CONTROL = 11, 19, 23
 N_FEATURES = N_COMMON + N_DESIGN + N_CONTROL

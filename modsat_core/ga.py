@@ -26,8 +26,12 @@ import math
 
 import numpy as np
 
-from .morphology import is_valid
+from .checkpoint import CHECKPOINT_VERSION, RunResult
+from .grid import is_valid
+from .policy_file import actor_from_state
+from .reports import run_files
 from .spec import JobSpec
+from .td3_run import TD3Run
 
 MAX_DRAWS = 100_000
 
@@ -116,8 +120,6 @@ class GARun:
 
     def _evaluate_pending(self, on_progress, on_checkpoint, should_stop) -> bool:
         """Train a controller for each pending design in turn; True if stopped."""
-        from .train import TD3Run
-
         total = self.spec.training.total_env_steps
         while self.pending and total - self.used >= self.spec.training.num_envs:
             grid = self.pending[0]
@@ -132,7 +134,8 @@ class GARun:
             def progress(p: dict, _o=offset, _g=self.generation) -> None:
                 on_progress({**p, "env_steps": _o + p["env_steps"], "total_env_steps": total,
                              "phase": f"ga generation {_g}, design {len(self.records) + 1}",
-                             "eval": None if p.get("eval") is None else {**p["eval"], "env_steps": _o + p["eval"]["env_steps"]}})
+                             "eval": None if p.get("eval") is None
+                             else {**p["eval"], "env_steps": _o + p["eval"]["env_steps"]}})
 
             def checkpoint(inner: dict) -> None:
                 self.inner_ckpt = inner
@@ -158,8 +161,6 @@ class GARun:
         return False
 
     def train(self, on_progress, on_checkpoint, should_stop, checkpoint: dict | None):
-        from .train import CHECKPOINT_VERSION, RunResult, actor_from_state, run_files
-
         def wrap(state: dict) -> None:
             on_checkpoint({"version": CHECKPOINT_VERSION, "algorithm": "ga", "env_steps": state["used"],
                            "run": state})

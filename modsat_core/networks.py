@@ -21,8 +21,8 @@ per-cell observations of :mod:`modsat_core.features`:
     pooling (the paper's suggestion for large grids) is not built: the mean already keeps
     5x5x5 within the cost aim (docs/benchmarks.md).
 
-Plain MLP pairs (``MLPActor`` / ``MLPCritic``) serve flat observations: gymnasium tasks
-and ``bench control``.
+Plain MLP pairs for flat observations (gymnasium tasks, ``bench control``) are in
+:mod:`modsat_core.flat_networks`.
 
 Every actor has ``act(x, act_mask, value_mask, design)`` over plain tensors (TorchScript
 can compile it, which the standalone export uses) and ``forward(obs: CellObs)``.
@@ -247,35 +247,6 @@ class SetCritic(nn.Module):
         q1[d], q2[d] = self.design(obs.x[d], obs.act_mask[d], obs.value_mask[d], action[d])
         q1[fly], q2[fly] = self.control(obs.x[fly], obs.act_mask[fly], obs.value_mask[fly], action[fly])
         return q1, q2
-
-
-# ----------------------------------------------------------------------------- flat
-
-
-class MLPActor(nn.Module):
-    """Deterministic actor for flat observations; actions in [-1, 1]^act_dim."""
-
-    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
-        super().__init__()
-        self.net = mlp([obs_dim, *hidden, act_dim])
-
-    def forward(self, obs: Tensor) -> Tensor:
-        return torch.tanh(self.net(obs))
-
-    @staticmethod
-    def finish(obs: Tensor, action: Tensor) -> Tensor:
-        return action.clamp(-1.0, 1.0)
-
-
-class MLPCritic(nn.Module):
-    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
-        super().__init__()
-        self.q1 = mlp([obs_dim + act_dim, *hidden, 1])
-        self.q2 = mlp([obs_dim + act_dim, *hidden, 1])
-
-    def forward(self, obs: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
-        xa = torch.cat((obs, action), dim=-1)
-        return self.q1(xa).squeeze(-1), self.q2(xa).squeeze(-1)
 
 
 # ----------------------------------------------------------------------------- factory

@@ -10,8 +10,17 @@ import torch
 from torch import Tensor, nn
 
 from .codesign_env import seed_grid
-from .features import N_COMMON, N_CONTROL_GLOBAL, N_DESIGN, CellObs, PhysState, cell_observation, control_globals
-from .morphology import ACTUATOR, seed_component_batched
+from .features import (
+    N_COMMON,
+    N_CONTROL_GLOBAL,
+    N_DESIGN,
+    CellObs,
+    PhysState,
+    cell_observation,
+    control_globals,
+)
+from .grid import ACTUATOR
+from .morphology import seed_component_batched
 from .slew import SlewSim
 from .spec import JobSpec
 

@@ -19,8 +19,15 @@ from torch import Tensor
 
 from . import dynamics as dyn
 from . import quaternion as quat
-from .mission import EpisodeDraw, error_quaternion, eigenaxis_bound_s, reward, slew_axis_properties
-from .morphology import ACTUATOR, mass_properties
+from .grid import ACTUATOR
+from .mission import (
+    EpisodeDraw,
+    eigenaxis_bound_s,
+    error_quaternion,
+    reward,
+    slew_axis_properties,
+)
+from .morphology import mass_properties
 from .spec import Mission, ModuleCatalog
 
 
@@ -67,7 +74,8 @@ class Design:
                    actuator_positions_B_m=mp.positions_B_m[mp.types == ACTUATOR])
 
 
-def episode_metrics(m: Metrics, phi_rad: Tensor, omega_norm: Tensor, t_s: Tensor, mission: Mission) -> dict[str, Tensor]:
+def episode_metrics(m: Metrics, phi_rad: Tensor, omega_norm: Tensor, t_s: Tensor, mission: Mission
+                    ) -> dict[str, Tensor]:
     """Summary of finished episodes (all tensors (B,)); see DESIGN.md, "Metrics"."""
     tol = mission.tolerance_deg * quat.DEG
     settled_now = (phi_rad <= tol) & (omega_norm <= mission.rate_tolerance_rad_s)

@@ -12,8 +12,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from .networks import MLPActor, MLPCritic
+from .flat_networks import MLPActor, MLPCritic
 from .td3 import TD3, ReplayBuffer, TD3Config
+
+#: The TD3 settings of the gym check (frozen: a safe default argument).
+GYM_TD3 = TD3Config(actor_lr=1e-3, critic_lr=1e-3)
 
 
 def evaluate_gym(env_id: str, actor: MLPActor, scale: np.ndarray, episodes: int, seed: int) -> float:
@@ -46,7 +49,7 @@ def train_gym(
     eval_every: int = 2_000,
     eval_episodes: int = 10,
     target_return: float | None = None,
-    cfg: TD3Config = TD3Config(actor_lr=1e-3, critic_lr=1e-3),
+    cfg: TD3Config = GYM_TD3,
     on_eval: Callable[[int, float], None] | None = None,
 ) -> list[tuple[int, float]]:
     """Train on a Box-action gymnasium env; returns the curve [(env_steps, mean eval return)].

@@ -77,7 +77,7 @@ def _databases(which: list[str], pg_admin: str, tmp: Path):
         else:
             try:
                 db = _PgDatabase(pg_admin)
-            except Exception as exc:  # noqa: BLE001 - report and skip
+            except Exception as exc:
                 yield kind, None, f"skipped: PostgreSQL not reachable at {pg_admin}: {exc}"
                 continue
             yield kind, db.url, db.drop
@@ -252,7 +252,7 @@ def bench_threads(threads: list[int], busy: int = 1) -> dict:
                 port = _free_port()
                 env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
                 proc = subprocess.Popen(
-                    [sys.executable, "-m", "modsat_core.cli", "serve", "--workers", "1", "--port", str(port),
+                    [sys.executable, "-m", "server.cli", "serve", "--workers", "1", "--port", str(port),
                      "--no-viewer", "--data-dir", tmp], env={**env, "MODSAT_TORCH_THREADS": str(n)},
                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
                 try:
@@ -278,7 +278,7 @@ def bench_threads(threads: list[int], busy: int = 1) -> dict:
         for b in burners:
             b.kill()
     t = out["run_seconds"]
-    if "1" in t and t["1"]:
+    if t.get("1"):
         out["ratio_to_1_thread"] = {k: (v / t["1"] if v else None) for k, v in t.items()}
     return out
 

@@ -1,204 +1,529 @@
-"""``modsat serve`` and ``modsat worker`` (wired into modsat_core/cli.py by ``add_commands``)."""
+"""The ``modsat`` command line.
+
+It lives in the top layer because it runs everything: training and benchmarks
+(modsat_core), the 3D recordings (web), the service's limits (worker) and the service
+(server/cli_service.py: ``serve``, ``worker``, ``view``). Imports stay inside the commands so
+that ``modsat presets`` or ``modsat check`` never load torch."""
 
 from __future__ import annotations
 
 import argparse
+import errno
+import json
 import os
 import signal
-import subprocess
 import sys
 import time
 
-from pydantic import ValidationError
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from modsat_core.bench import bench_sim
 
-def add_commands(sub) -> None:
-    """Add ``serve`` and ``worker`` to the ``modsat`` sub-command parser ``sub``."""
-    from worker.args import add_worker_arguments
-
-    s = sub.add_parser("serve", help="run the job service on this machine: REST API + N local workers")
-    s.add_argument("--workers", type=int, default=1, metavar="N", help="local worker processes (default 1)")
-    s.add_argument("--db", metavar="URL", help="job store URL (default: SQLite file in --data-dir)")
-    s.add_argument("--data-dir", help="directory of the default SQLite database (default ./modsat-data)")
-    s.add_argument("--host", help="address to listen on (default 127.0.0.1)")
-    s.add_argument("--port", type=int, help="port to listen on (default 8000)")
-    s.add_argument("--runner", help="what workers run: train (default), or noop / simulated / raise for tests")
-    s.add_argument("--viewer-port", type=int, metavar="PORT",
-                   help="port of the live 3D viewer (default 8080; 0 = any free port; a busy port moves up)")
-    s.add_argument("--no-viewer", action="store_true", help="do not run the live 3D viewer")
-    s.set_defaults(func=_cmd_serve)
-
-    v = sub.add_parser("view", help="show runs written by `modsat train --out DIR` in the 3D viewer (no service)")
-    v.add_argument("run_dirs", nargs="+", metavar="RUN_DIR",
-                   help="one run, or two to see them side by side (e.g. RL and GA); more can be picked in the viewer")
-    v.add_argument("--port", type=int, default=8080, help="port of the viewer (default 8080; a busy port moves up)")
-    v.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    v.add_argument("--save", metavar="FILE",
-                   help="write the first run's evaluation recording instead (FILE.viser, or FILE.html: one "
-                        "self-contained page) and exit")
-    v.set_defaults(func=_cmd_view)
-
-    w = sub.add_parser("worker", help="run one worker that pulls jobs from the job store at --db URL")
-    add_worker_arguments(w)
-    w.set_defaults(func=_cmd_worker)
-
-
-def _cmd_worker(args: argparse.Namespace) -> int:
-    from worker.main import run_worker
-
-    return run_worker(args)
-
-
-def _stop_workers(procs: list[subprocess.Popen], grace_s: float) -> None:
-    """SIGTERM (the training checkpoints, the job is requeued), then SIGKILL after ``grace_s``."""
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-    deadline = time.monotonic() + grace_s
-    try:
-        for p in procs:
-            p.wait(timeout=max(0.1, deadline - time.monotonic()))
-    except (subprocess.TimeoutExpired, KeyboardInterrupt):
-        for p in procs:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)  # a second signal: stop without waiting for the training
-        time.sleep(1.0)
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-            p.wait()
-
-
-def _port_in_use(host: str, port: int) -> str | None:
-    """Why (host, port) cannot be listened on, or None: checked before the workers and the
-    viewer start, so that a second `modsat serve` stops with one clear line."""
-    import socket
-
-    if port == 0:
-        return None
-    try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
-    except socket.gaierror as exc:
-        return str(exc)
-    family, kind, proto, _, addr = infos[0]
-    with socket.socket(family, kind, proto) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
-        try:
-            sock.bind(addr)
-        except OSError as exc:
-            return exc.strerror or str(exc)
-    return None
-
-
-def _cmd_serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
-    from worker.store import JobStore
-
-    from .app import create_app
-    from .settings import ServerSettings
-
-    if args.workers < 0 or args.workers > 256:
-        print("modsat serve: --workers must be between 0 and 256", file=sys.stderr)
-        return 2
-    given = {"db_url": args.db, "data_dir": args.data_dir, "host": args.host, "port": args.port,
-             "runner": args.runner, "viewer_port": args.viewer_port, "viewer": False if args.no_viewer else None}
-    try:
-        settings = ServerSettings(**{k: v for k, v in given.items() if v is not None})
-    except ValidationError as exc:
-        print(f"modsat serve: invalid setting: {exc}", file=sys.stderr)
-        return 2
-    busy = _port_in_use(settings.host, settings.port)
-    if busy:
-        print(f"modsat serve: cannot listen on {settings.host}:{settings.port}: {busy} (is another `modsat serve` "
-              "running?); choose another port with --port", file=sys.stderr)
-        return 1
-    url = settings.resolved_db_url
-    try:
-        store = JobStore(url, busy_timeout_s=settings.sqlite_busy_timeout_s)
-    except Exception as exc:  # noqa: BLE001 - a bad URL: say so and stop
-        print(f"modsat serve: {exc}", file=sys.stderr)
-        return 2
-    try:
-        store.create_schema()  # once, before the workers start
-    except Exception as exc:  # noqa: BLE001 - say what is wrong with the database and stop
-        print(f"modsat serve: cannot open the job store {store.url_for_humans}: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        store.dispose()
-
-    shown_host = "127.0.0.1" if settings.host in ("0.0.0.0", "::") else settings.host
-    base = f"http://{shown_host}:{settings.port}"
-    print(f"modsat: job store  {store.url_for_humans}", flush=True)
-    print(f"modsat: API        {base}/api  (OpenAPI: {base}/api/openapi.json)", flush=True)
-    print(f"modsat: web UI     {base}/", flush=True)
-    print(f"modsat: {args.workers} local worker(s); add more anywhere with: modsat worker --db URL", flush=True)
-    if settings.host in ("0.0.0.0", "::") and not settings.allowed_hosts:
-        print("modsat: listening on every interface, but answering only to localhost names: set "
-              "MODSAT_ALLOWED_HOSTS to the names or addresses others use to reach this machine", flush=True)
-
-    env = dict(os.environ, MODSAT_RUNNER=settings.runner)
-    procs = [
-        subprocess.Popen([sys.executable, "-m", "worker", "--db", url, "--exit-with-parent", str(os.getpid())],
-                         env=env, start_new_session=True)  # Ctrl-C reaches us; we stop them in order
-        for _ in range(args.workers)
-    ]
-
-    def announce(where: str) -> None:
-        print(f"modsat: 3D viewer  {where.replace('HOST', shown_host)}", flush=True)
-
-    server = uvicorn.Server(uvicorn.Config(create_app(settings, announce=announce), host=settings.host,
-                                           port=settings.port, log_level="info", timeout_graceful_shutdown=3))
-    try:
-        server.run()
-    except (KeyboardInterrupt, SystemExit):  # uvicorn re-raises the Ctrl-C it handled, exits if it cannot bind
-        pass
-    finally:
-        if procs:
-            print(f"modsat: stopping {len(procs)} worker(s)...", flush=True)
-            _stop_workers(procs, settings.cancel_grace_s + 5.0)
-    print("modsat: stopped", flush=True)
-    return 0 if server.started else 1
-
-
-def _cmd_view(args: argparse.Namespace) -> int:
-    """``modsat view RUN_DIR [RUN_DIR ...]``: the live viewer on local runs, until Ctrl-C."""
-    from pathlib import Path
-
-    from web.live import DirRuns, ViewerApp
-
-    try:
-        source = DirRuns(args.run_dirs)
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"modsat view: {exc}", file=sys.stderr)
-        return 2
-    if args.save:
-        from web.recording import recording_bytes, recording_html
-
-        run_dir = Path(args.run_dirs[0])
-        spec = run_dir / "spec.json"
-        data = recording_bytes((run_dir / "design.json").read_bytes(), (run_dir / "trajectories.json").read_bytes(),
-                               spec_json=spec.read_bytes() if spec.is_file() else None, title=run_dir.name)
-        out = Path(args.save)
-        if out.suffix.lower() == ".html":
-            data = recording_html(data).encode()
-        out.write_bytes(data)
-        print(f"modsat view: wrote {out} ({len(data):,} bytes)")
-        return 0
-    if not 0 <= args.port <= 65535:
-        print("modsat view: --port must be between 0 and 65535", file=sys.stderr)
-        return 2
-    app = ViewerApp(source, host=args.host, port=args.port, label="modsat view",
-                    allowed_hosts=os.environ.get("MODSAT_ALLOWED_HOSTS", ""))
-    shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
-    names = " vs ".join(Path(p).name for p in args.run_dirs[:2])
-    print(f"modsat view: {names} at http://{shown}:{app.port}/  (Ctrl-C to stop)", flush=True)
-    try:
-        while True:
-            time.sleep(3600)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        app.stop()
+    report = bench_sim(batch_sizes=tuple(args.batch), min_seconds=args.seconds, dtype=args.dtype)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(f"{report['unit']}, {report['dtype']}, torch {report['torch']}, {report['threads']} threads")
+        for name, r in report["results"].items():
+            print(f"  {name:>12}: {r['control_steps_per_s']:>12,.0f}   x{r['ratio_to_numpy']:.1f} vs numpy")
     return 0
 
+
+#: Per-cell rows one `bench update` batch may hold (256 x 1,000: batch 256 on 10x10x10).
+MAX_BENCH_CELL_ROWS = 256_000
+
+
+def _cmd_bench_update(args: argparse.Namespace) -> int:
+    from modsat_core.bench_update import bench_update
+
+    if not (1 <= args.rounds <= 100 and 1 <= args.batch_size <= 65536 and all(2 <= n <= 10 for n in args.grids)
+            and all(4 <= h <= 2048 for h in args.hidden) and len(args.hidden) <= 4):
+        raise SystemExit("modsat bench update: --rounds must be 1 to 100, --batch-size 1 to 65,536, --grids between "
+                         "2 and 10, --hidden at most 4 sizes of 4 to 2,048")
+    if args.batch_size * max(args.grids) ** 3 > MAX_BENCH_CELL_ROWS:
+        # The per-module network holds batch x N^3 rows of every layer's activations.
+        raise SystemExit(f"modsat bench update: --batch-size x N^3 of the largest grid must be at most "
+                         f"{MAX_BENCH_CELL_ROWS:,} (the per-module network's rows per layer); got "
+                         f"{args.batch_size * max(args.grids) ** 3:,}")
+    report = bench_update(grids=tuple(args.grids), hidden=tuple(args.hidden), batch=args.batch_size,
+                          rounds=args.rounds)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(f"{report['unit']}, batch {report['batch_size']}, {report['hidden_sizes']}, "
+              f"{report['threads']} thread(s)")
+        for grid, r in report["results"].items():
+            print(f"  {grid}: flat {r['flat_ms']:.1f} ms, per-module {r['per-module_ms']:.1f} ms "
+                  f"(x{r['per-module_ratio']:.1f}), set {r['set_ms']:.1f} ms (x{r['set_ratio']:.1f}); "
+                  f"features {r['features_ms']:.1f} ms")
+    return 0
+
+
+def _cmd_bench_learning(args: argparse.Namespace) -> int:
+    _set_threads(None)
+    from modsat_core.bench_learning import bench_learn, bench_rl_vs_ga
+
+
+    spec = _load_spec(args)
+    if args.out:  # before hours of training, not after
+        os.makedirs(args.out, exist_ok=True)
+    if args.what == "learn":
+        report = bench_learn(spec, args.seeds, args.out, _log)
+    else:
+        if spec.algorithm != "td3-codesign":
+            raise SystemExit("modsat bench rl-vs-ga: give a td3-codesign spec; its GA twin is derived from it")
+        report = bench_rl_vs_ga(spec, args.seeds, args.population, args.steps_per_design, args.out, _log)
+    _print_report(report, os.path.join(args.out, f"bench-{args.what}.json") if args.out else None)
+    return 0
+
+
+def _cmd_bench_control(args: argparse.Namespace) -> int:
+    _set_threads(None)
+    from modsat_core.bench_control import bench_control
+
+
+    if args.eval_every < 1:
+        raise SystemExit("modsat bench control: --eval-every must be at least 1")
+    spec = _load_spec(args)
+    if args.out:  # before the training, not after
+        if os.path.isdir(args.out):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    report = bench_control(spec, eval_every=args.eval_every, log=_log)
+    _print_report(report, args.out)
+    return 0
+
+
+def _log(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _print_report(report: dict, path: str | None) -> None:
+    """A benchmark's JSON report on stdout and, if ``path``, in that file."""
+    text = json.dumps(report, indent=2)
+    if path:
+        with open(path, "w") as fh:
+            fh.write(text + "\n")
+    print(text)
+
+
+def _cmd_presets(args: argparse.Namespace) -> int:
+    from modsat_core.presets import PRESETS, get_preset
+
+    if args.name:
+        print(get_preset(args.name).model_dump_json(indent=2))
+    elif args.json:
+        print(json.dumps({k: v.model_dump(mode="json") for k, v in PRESETS.items()}, indent=2))
+    else:
+        for name, spec in PRESETS.items():
+            t = spec.training
+            n = spec.design.grid_size
+            print(f"{name:<12} {spec.algorithm:<13} {n}x{n}x{n}  {t.total_env_steps:>9,} env steps")
+    return 0
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    from modsat_core.spec import JobSpec
+
+    if args.markdown:
+        from modsat_core.specdoc import spec_markdown
+
+        print(spec_markdown(), end="")
+    else:
+        print(json.dumps(JobSpec.model_json_schema(), indent=2))
+    return 0
+
+
+def _limits():
+    """The per-job limits of the MODSAT_* settings (the service's; docs/service.md, "Limits")."""
+    from pydantic import ValidationError
+
+    from worker.settings import WorkerSettings
+
+    try:
+        return WorkerSettings().limits()
+    except ValidationError as exc:
+        raise SystemExit(f"modsat: bad MODSAT_* setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}"
+                         ) from None
+
+
+def _check_limits(spec, command: str) -> None:
+    from modsat_core.limits import check
+
+    problems = check(spec, _limits())
+    if problems:
+        print(f"modsat {command}: this spec is over the limits (raise them with the MODSAT_* variables named if "
+              "this machine can take it):\n  " + "\n  ".join(m for _, m in problems), file=sys.stderr)
+        raise SystemExit(2)
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from modsat_core.limits import estimate
+    from modsat_core.spec import parse_spec
+
+    with open(args.spec, "rb") as fh:
+        spec = parse_spec(fh.read())
+    _check_limits(spec, "check")
+    est = estimate(spec)
+    print(f"ok: {spec.algorithm}, {spec.design.grid_size}^3 grid, {spec.training.total_env_steps:,} env steps, "
+          f"about {est.memory_bytes / 2**30:.1f} GiB of memory (replay buffer {est.replay_bytes / 2**30:.2f} GiB)")
+    return 0
+
+
+def _set_threads(n: int | None) -> None:
+    """Torch threads of this process: ``--threads``, else MODSAT_TORCH_THREADS, else 1 (on a busy
+    machine torch's default of one per core measured about 20x slower)."""
+
+    if n is None:
+        raw = os.environ.get("MODSAT_TORCH_THREADS", "").strip() or "1"
+        if not raw.isdigit() or not 1 <= int(raw) <= 256:
+            raise SystemExit(f"modsat: MODSAT_TORCH_THREADS must be a number from 1 to 256; got {raw!r}")
+        n = int(raw)
+    if not 1 <= n <= 256:
+        raise SystemExit(f"modsat: --threads must be from 1 to 256; got {n}")
+    import torch
+
+    torch.set_num_threads(n)
+
+
+def _load_spec(args: argparse.Namespace):
+    from modsat_core.presets import get_preset
+    from modsat_core.spec import parse_spec
+
+    if (args.preset is None) == (args.spec is None):
+        raise SystemExit("modsat train: give either --preset NAME or a SPEC.json file")
+    if args.preset is not None:
+        spec = get_preset(args.preset)
+    else:
+        with open(args.spec, "rb") as fh:
+            spec = parse_spec(fh.read())
+    updates = {}
+    if args.steps is not None:
+        updates["total_env_steps"] = args.steps
+    if args.device is not None:
+        updates["device"] = args.device
+    if getattr(args, "hidden", None):
+        updates["hidden_sizes"] = args.hidden
+    if updates:
+        spec = spec.model_copy(update={"training": spec.training.model_copy(update=updates)})
+    if args.seed is not None:
+        spec = spec.model_copy(update={"seed": args.seed})
+    return parse_spec(spec.model_dump_json())  # re-validated after the overrides
+
+
+class _ProgressBar:
+    """One line on a terminal, redrawn in place; a line per evaluation otherwise."""
+
+    def __init__(self, stream=sys.stderr):
+
+        self.stream, self.t0, self.time = stream, time.monotonic(), time.monotonic
+        self.tty = stream.isatty()
+        self.last_eval = ""
+        self.recent: list[tuple[float, int]] = []  # (time, env steps) of the last minute
+
+    def __call__(self, p: dict) -> None:
+        done, total = p["env_steps"], max(p["total_env_steps"], 1)
+        now = self.time()
+        # The rate of the last minute, not since the start: a resumed run starts at its
+        # checkpoint, and the machine's load changes (the ETA once read 105 s, then 2,533 s).
+        self.recent.append((now, done))
+        while len(self.recent) > 2 and now - self.recent[1][0] >= 60.0:
+            self.recent.pop(0)  # keep one point at least a minute old (or the oldest) as the anchor
+        t_old, s_old = self.recent[0]
+        rate = (done - s_old) / (now - t_old) if now > t_old else 0.0
+        eta = (total - done) / rate if rate > 0 else float("nan")
+        if p.get("eval"):
+            e = p["eval"]
+            self.last_eval = f"eval return {e['mean_return']:.1f}, success {100 * e['success_rate']:.0f}%"
+        width = 24
+        fill = int(width * min(done / total, 1.0))
+        line = (f"[{'#' * fill}{'.' * (width - fill)}] {done:,}/{total:,} steps  {rate:,.0f} steps/s  "
+                f"eta {eta:,.0f} s  {p.get('phase', '')}  {self.last_eval}")
+        if self.tty:
+            self.stream.write("\r" + line[:160].ljust(160))
+        elif p.get("eval") or p.get("phase") == "evaluating":
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+
+    from modsat_core.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
+    from modsat_core.train import train
+
+    spec = _load_spec(args)
+    _check_limits(spec, "train")
+    _set_threads(args.threads)
+    out = args.out
+    os.makedirs(out, exist_ok=True)
+    ckpt_path = os.path.join(out, "checkpoint.pt")
+    checkpoint = None
+    if args.resume and os.path.exists(ckpt_path):
+        with open(ckpt_path, "rb") as fh:
+            checkpoint = checkpoint_from_bytes(fh.read())
+        print(f"resuming from {ckpt_path} at {checkpoint['env_steps']:,} env steps", file=sys.stderr)
+    stop = {"flag": False}
+
+    def on_sigint(*_):
+        stop["flag"] = True  # the training checkpoints and returns
+
+    def save_ckpt(ck: dict) -> None:
+        tmp = ckpt_path + ".tmp"
+        with open(tmp, "wb") as fh:
+            fh.write(checkpoint_to_bytes(ck))
+        os.replace(tmp, ckpt_path)
+
+    # Ctrl-C and SIGTERM (a scheduler, `kill`) both stop at a checkpoint that --resume continues.
+    old = {sig: signal.signal(sig, on_sigint) for sig in (signal.SIGINT, signal.SIGTERM)}
+    bar = _ProgressBar()
+    try:
+        result = train(spec, on_progress=bar, on_checkpoint=save_ckpt, should_stop=lambda: stop["flag"],
+                       checkpoint=checkpoint)
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        bar.close()
+    if result.stopped:
+        print(f"stopped at {result.env_steps:,} env steps; continue with: modsat train ... --out {out} --resume",
+              file=sys.stderr)
+        return 130
+    from modsat_core.verify import add_verification
+    from web.recording import (
+        add_recording,  # the 3D replay, evaluation.viser (docs/viewer.md)
+    )
+
+    files = result.artifacts()
+    add_recording(files)
+    if add_verification(files):
+        report = json.loads(files["verification.json"])
+        print("modsat train: " + ("the evaluation slews were flown in Basilisk too: verification.json"
+                                  if report["available"] else f"no Basilisk verification: {report['reason']}"),
+              file=sys.stderr)
+    for name, data in files.items():
+        with open(os.path.join(out, name), "wb") as fh:
+            fh.write(data)
+    if os.path.exists(ckpt_path):
+        os.remove(ckpt_path)
+    _print_evaluation(result.summary, sys.stdout)
+    print(f"outputs in {out}/: {', '.join(sorted(files))}")
+    return 0
+
+
+def _print_evaluation(summary: dict, stream) -> None:
+    d = summary.get("design", {})
+    print(f"design: {d.get('modules')} modules, {d.get('actuators')} actuators, valid={d.get('valid')}", file=stream)
+    rows = [("policy", summary.get("policy"))]
+    if summary.get("pd_baseline"):
+        rows.append(("PD baseline", summary["pd_baseline"]))
+    print(f"{'':<12} {'episodes':>8} {'success':>8} {'@0.25deg':>9} {'@1deg':>7} {'return':>16} "
+          f"{'slew/bound':>10}", file=stream)
+    for name, s in rows:
+        if s is None:
+            continue
+
+        def pct(key, s=s):
+            return f"{100 * s[key]:.0f}%" if s.get(key) is not None else "-"
+
+        ratio = s.get("median_slew_time_ratio")
+        print(f"{name:<12} {s['episodes']:>8} {pct('success_rate'):>8} {pct('success_rate_at_0.25_deg'):>9} "
+              f"{pct('success_rate_at_1_deg'):>7} {s['mean_return']:>8.1f} +/- {s.get('std_return', 0):<5.1f} "
+              f"{'-' if ratio is None else f'{ratio:.2f}':>10}", file=stream)
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    _set_threads(None)
+
+    from modsat_core.policy_file import load_policy
+    from modsat_core.reports import final_evaluation
+
+    path = os.path.join(args.run_dir, "policy.pt")
+    with open(path, "rb") as fh:
+        actor, grid, spec = load_policy(fh.read())
+    if grid is None:
+        print("modsat: this policy has no design", file=sys.stderr)
+        return 2
+    ev = final_evaluation(actor, grid, spec, episodes=args.episodes)
+    ev.pop("trajectories")
+    if args.json:
+        ev["policy"].pop("episodes", None)
+        if ev["pd_baseline"]:
+            ev["pd_baseline"].pop("episodes", None)
+        print(json.dumps(ev, indent=2))
+    else:
+        from modsat_core.reports import design_report
+
+        d = design_report(grid, spec)
+        summary = {"design": d, "policy": ev["policy"]["summary"],
+                   "pd_baseline": ev["pd_baseline"]["summary"] if ev["pd_baseline"] else None}
+        _print_evaluation(summary, sys.stdout)
+    return 0
+
+
+def _cmd_verify(args: argparse.Namespace) -> int:
+    _set_threads(None)
+    from modsat_core.verify import (
+        BASILISK_MISSING,
+        DEFAULT_WHEEL_INERTIA_KGM2,
+        WheelOptions,
+        basilisk_available,
+        format_report,
+        verify_run,
+    )
+
+    if not args.basilisk:
+        print("modsat verify: name the simulator to fly the slews in: --basilisk", file=sys.stderr)
+        return 2
+    if not basilisk_available():
+        print(BASILISK_MISSING, file=sys.stderr)
+        return 2
+    coulomb, viscous = args.wheel_friction or (0.0, 0.0)
+    inertia = DEFAULT_WHEEL_INERTIA_KGM2 if args.wheel_inertia is None else args.wheel_inertia
+    try:
+        wheels = WheelOptions(speed_max_rpm=args.wheel_speed_max, coulomb_friction_Nm=coulomb,
+                              viscous_friction_Nms=viscous, inertia_kgm2=inertia)
+        report = verify_run(args.run_dir, episodes=args.episodes, wheels=wheels, log=_log)
+    except ValueError as exc:  # a bad option, spec or design: a message, not a traceback
+        print(f"modsat verify: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(report, indent=2) if args.json else format_report(report))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="modsat",
+                                description="Co-design of modular satellites and their attitude control.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    b = sub.add_parser("bench", help="benchmarks (not tests): print rates and ratios")
+    bsub = b.add_subparsers(dest="what", required=True)
+    bs = bsub.add_parser("sim", help="batched simulator vs one-satellite numpy, control steps per second")
+    bs.add_argument("--json", action="store_true", help="print the report as JSON")
+    bs.add_argument("--batch", type=int, nargs="+", default=[1, 256, 4096], help="batch sizes to time")
+    bs.add_argument("--seconds", type=float, default=2.0, help="minimum timing per case")
+    bs.add_argument("--dtype", choices=["float32", "float64"], default="float32")
+    bs.set_defaults(func=_cmd_bench)
+    bu = bsub.add_parser("update", help="milliseconds per TD3 update: flat, per-module and set networks, one thread")
+    bu.add_argument("--json", action="store_true", help="print the report as JSON")
+    bu.add_argument("--grids", type=int, nargs="+", default=[3, 5], help="grid sizes N (default 3 5)")
+    bu.add_argument("--hidden", type=int, nargs="+", default=[256, 256], help="wide layers (default 256 256)")
+    bu.add_argument("--batch-size", type=int, default=256, help="transitions per update (default 256)")
+    bu.add_argument("--rounds", type=int, default=5, help="timed rounds, networks taking turns (default 5)")
+    bu.set_defaults(func=_cmd_bench_update)
+    for what, text in (("learn", "train a spec over several seeds: wall time, success at 0.25/1 deg, PD comparison"),
+                       ("rl-vs-ga", "RL co-design vs the GA baseline at the same env-step budget, several seeds")):
+        bl = bsub.add_parser(what, help=text)
+        bl.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
+        bl.add_argument("--preset", help="a named preset (see `modsat presets`)")
+        bl.add_argument("--steps", type=int, help="override training.total_env_steps")
+        bl.add_argument("--device", choices=["auto", "cpu", "cuda"], help="override training.device")
+        bl.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds to run (default 0 1 2)")
+        bl.add_argument("--out", help="also write each run's outputs and the JSON report here")
+        if what == "rl-vs-ga":
+            bl.add_argument("--population", type=int, default=6, help="GA population size (default 6)")
+            bl.add_argument("--steps-per-design", type=int, default=10_000,
+                            help="GA: TD3 env steps per evaluated design (default 10,000)")
+        bl.set_defaults(func=_cmd_bench_learning, seed=None)
+
+    bc = bsub.add_parser("control", help="flat-MLP TD3 flying one fixed design on a spec's mission: "
+                         "is the mission learnable, at what cost")
+    bc.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
+    bc.add_argument("--preset", help="a named preset (see `modsat presets`)")
+    bc.add_argument("--steps", type=int, help="override training.total_env_steps")
+    bc.add_argument("--seed", type=int, help="override the seed")
+    bc.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes (default: training.hidden_sizes)")
+    bc.add_argument("--eval-every", type=int, default=5_000, help="env steps between evaluations (default 5,000)")
+    bc.add_argument("--out", help="also write the JSON report to this file")
+    bc.set_defaults(func=_cmd_bench_control, device=None)
+
+    pr = sub.add_parser("presets", help="list the named presets, or print one as JSON")
+    pr.add_argument("name", nargs="?")
+    pr.add_argument("--json", action="store_true")
+    pr.set_defaults(func=_cmd_presets)
+
+    sc = sub.add_parser("schema", help="print the JSON schema of JobSpec")
+    sc.add_argument("--markdown", action="store_true", help="the reference tables of docs/spec.md instead")
+    sc.set_defaults(func=_cmd_schema)
+
+    ck = sub.add_parser("check", help="validate a spec file (JSON)")
+    ck.add_argument("spec")
+    ck.set_defaults(func=_cmd_check)
+
+    tr = sub.add_parser("train", help="train a co-design (or GA / control-only) run and write its outputs")
+    tr.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
+    tr.add_argument("--preset", help="a named preset (see `modsat presets`)")
+    tr.add_argument("--out", required=True, help="output directory")
+    tr.add_argument("--steps", type=int, help="override training.total_env_steps")
+    tr.add_argument("--seed", type=int, help="override the seed")
+    tr.add_argument("--device", choices=["auto", "cpu", "cuda"], help="override training.device")
+    tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt (after Ctrl-C)")
+    tr.add_argument("--threads", type=int,
+                    help="torch threads (default: MODSAT_TORCH_THREADS, else 1; one per training process is fastest "
+                    "on a busy machine)")
+    tr.set_defaults(func=_cmd_train)
+
+    ev = sub.add_parser("eval", help="Monte-Carlo evaluation of a trained run (policy and PD baseline)")
+    ev.add_argument("run_dir", help="a directory written by `modsat train`")
+    ev.add_argument("--episodes", type=int, help="number of seeded slews (default: the spec's)")
+    ev.add_argument("--json", action="store_true")
+    ev.set_defaults(func=_cmd_eval)
+
+    vf = sub.add_parser("verify", help="fly a run's evaluation slews in Basilisk beside modsat's simulator and compare "
+                        "(docs/verification.md)")
+    vf.add_argument("run_dir", help="a directory written by `modsat train`")
+    vf.add_argument("--basilisk", action="store_true",
+                    help="fly them in Basilisk (needs the optional extra: pip install -e '.[basilisk]')")
+    vf.add_argument("--episodes", type=int, help="number of seeded slews (default: the spec's)")
+    vf.add_argument("--json", action="store_true")
+    vf.add_argument("--wheel-speed-max", type=float, metavar="RPM",
+                    help="Basilisk's wheel-speed limit (a less ideal plant: agreement no longer expected)")
+    vf.add_argument("--wheel-friction", type=float, nargs=2, metavar=("COULOMB_NM", "VISCOUS_NMS"),
+                    help="Basilisk's wheel friction: Coulomb torque (N m) and viscous coefficient (N m s/rad)")
+    vf.add_argument("--wheel-inertia", type=float, metavar="KGM2",
+                    help="wheel spin inertia Js (default 0.01; alone it changes nothing, with a speed limit it does)")
+    vf.set_defaults(func=_cmd_verify)
+
+    _add_service_commands(sub)
+    return p
+
+
+def _add_service_commands(sub) -> None:
+    """`serve` and `worker` live with the service (server/, worker/), in the same distribution."""
+    from .cli_service import add_commands
+
+    add_commands(sub)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if getattr(args, "seconds", 1.0) <= 0 or any(b < 1 or b > 1_000_000 for b in getattr(args, "batch", [])):
+        print("modsat: --seconds must be > 0 and --batch sizes between 1 and 1,000,000", file=sys.stderr)
+        return 2
+    if getattr(args, "episodes", None) is not None and not 1 <= args.episodes <= 10_000:
+        print("modsat: --episodes must be between 1 and 10,000", file=sys.stderr)
+        return 2
+    from modsat_core.spec import SpecError
+
+    try:
+        rc = args.func(args)
+        sys.stdout.flush()  # here, where a closed pipe is caught, not at exit
+        return rc
+    except BrokenPipeError:  # e.g. `modsat presets quick | head`: the reader left; say nothing
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
+        return 141
+    except SpecError as exc:
+        print(f"modsat: {exc}", file=sys.stderr)
+        return 2
+    except (KeyError, OSError) as exc:  # an unknown preset; a file or directory that cannot be used
+        msg = exc.args[0] if isinstance(exc, KeyError) else f"{exc.strerror or exc}: {exc.filename}"
+        print(f"modsat: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

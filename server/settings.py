@@ -43,7 +43,8 @@ class ServerSettings(WorkerSettings):
     max_active_jobs: int = Field(
         100, ge=1, le=1_000_000, description="Queued plus running jobs; a submission beyond it is 429."
     )
-    web_dir: str | None = Field(None, description="Directory of the web UI's files (default: web/static/, installed with the package).")
+    web_dir: str | None = Field(
+        None, description="Directory of the web UI's files (default: web/static/, installed with the package).")
 
     @field_validator("api_token")
     @classmethod

@@ -137,7 +137,7 @@ class Session:
         try:
             with self.lock:
                 fn()
-        except Exception as exc:  # noqa: BLE001 - show it in the tab, keep the viewer alive
+        except Exception as exc:
             log.exception("viewer session error")
             with contextlib.suppress(Exception):
                 self.readout.content = f"**error:** {type(exc).__name__}: {exc}"
@@ -329,7 +329,7 @@ class ViewerApp:
     """A viser server with one :class:`Session` per browser tab. Runs in viser's threads."""
 
     def __init__(self, source: RunSource, *, host: str = "127.0.0.1", port: int = 8080,
-                 label: str = "modsat viewer", cache_size: int = 8, allowed_hosts: set[str] | None | str = ""):
+                 label: str = "modsat viewer", cache_size: int = 8, allowed_hosts: set[str] | str | None = ""):
         """``allowed_hosts``: the host names the websocket answers to, and whose pages may open
         it (origin.py); a string = extra names next to the loopback ones and ``host``."""
         import viser
@@ -368,7 +368,7 @@ class ViewerApp:
     def _connection(self, client):
         """viser's websocket connection of a tab (viser keeps the handshake request), or None."""
         try:
-            return self.server._websock_server._live_connections.get(client.client_id)  # noqa: SLF001 - viser 1.1.1
+            return self.server._websock_server._live_connections.get(client.client_id)
         except AttributeError:
             return None
 
@@ -395,13 +395,13 @@ class ViewerApp:
         if why is not None:
             log.warning("viewer: refused a websocket: %s", why)
             conn = self._connection(client)
-            loop = getattr(self.server._websock_server, "_background_event_loop", None)  # noqa: SLF001 - viser 1.1.1
+            loop = getattr(self.server._websock_server, "_background_event_loop", None)
             if conn is not None and loop is not None:  # plain callbacks run on viser's thread pool
                 asyncio.run_coroutine_threadsafe(conn.close(1008, "refused: " + why[:100]), loop)
             return
         try:
             self.sessions[client.client_id] = Session(self, client, self._query(client))
-        except Exception:  # noqa: BLE001 - a broken run must not take the viewer down
+        except Exception:
             log.exception("could not open a viewer session")
             client.gui.add_markdown("**modsat viewer**: could not open this view; see the server log.")
 
@@ -412,7 +412,7 @@ class ViewerApp:
             for s in list(self.sessions.values()):
                 try:
                     s.tick(now - last)
-                except Exception:  # noqa: BLE001 - a closed tab: forget it
+                except Exception:
                     log.debug("playback tick failed", exc_info=True)
             last = now
 

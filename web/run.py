@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from modsat_core.spec import ACTUATOR, EMPTY
+from modsat_core.grid import ACTUATOR, EMPTY
 
 #: Controllers in ``trajectories.json`` and how the viewer names them.
 CONTROLLERS = {"policy": "policy", "pd_baseline": "PD baseline"}

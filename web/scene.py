@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from modsat_core.spec import ACTUATOR, EMPTY
+from modsat_core.grid import ACTUATOR, EMPTY
 
 #: sRGB colours (0-255). The actuator colour is what the browser tests look for.
 STRUCTURE_SRGB = (150, 150, 150)
@@ -172,7 +172,7 @@ def lay_out(scene, prefixes: list[str], sats: list[SatelliteHandles], *, min_rad
     places = side_by_side_positions(radii)
     for prefix, pos in zip(prefixes, places):
         scene.add_frame(prefix, show_axes=False, position=pos)
-    biggest = max(radii + [min_radius])
+    biggest = max([*radii, min_radius])
     extent = max([abs(p[1]) for p in places] + [0.0]) + biggest
     scene.add_grid("/floor", width=2 * extent + 4, height=2 * extent + 4, cell_size=1.0, section_size=5.0,
                    position=(0.0, 0.0, -biggest - 0.5))

@@ -140,12 +140,12 @@ class db_now(FunctionElement):
 
 
 @compiles(db_now, "sqlite")
-def _db_now_sqlite(element, compiler, **kw):  # noqa: ARG001
+def _db_now_sqlite(element, compiler, **kw):
     return "((julianday('now') - 2440587.5) * 86400.0)"
 
 
 @compiles(db_now, "postgresql")
-def _db_now_postgresql(element, compiler, **kw):  # noqa: ARG001
+def _db_now_postgresql(element, compiler, **kw):
     return "CAST(EXTRACT(EPOCH FROM clock_timestamp()) AS DOUBLE PRECISION)"
 
 

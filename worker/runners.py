@@ -81,13 +81,13 @@ def checkpoint_from_bytes(data: bytes) -> dict:
     return json.loads(data)
 
 
-def noop(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:  # noqa: ARG001
+def noop(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:
     total = spec.training.total_env_steps
     on_progress({"env_steps": total, "total_env_steps": total, "updates": 0, "phase": "training", "eval": None})
     return SimpleResult(False, total, {"result.json": b'{"runner": "noop"}'}, {"runner": "noop"})
 
 
-def raising(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:  # noqa: ARG001
+def raising(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:
     raise RuntimeError(f"simulated training failure (runner 'raise', seed {spec.seed})")
 
 

@@ -25,11 +25,32 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Connection, LargeBinary, and_, delete, func, insert, literal, or_, select, update
+from sqlalchemy import (
+    Connection,
+    LargeBinary,
+    and_,
+    delete,
+    func,
+    insert,
+    literal,
+    or_,
+    select,
+    update,
+)
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import IntegrityError, ProgrammingError
 
-from .db import TERMINAL_STATUSES, artifacts, attempts, db_now, jobs, make_engine, metadata, metrics, workers
+from .db import (
+    TERMINAL_STATUSES,
+    artifacts,
+    attempts,
+    db_now,
+    jobs,
+    make_engine,
+    metadata,
+    metrics,
+    workers,
+)
 from .jsonsafe import to_json
 
 #: A job id outside this range cannot exist (and would overflow a BIGINT bind parameter).

@@ -7,7 +7,7 @@ Imported only in the training child (it loads torch)."""
 
 from __future__ import annotations
 
-from modsat_core.train import RunResult, checkpoint_from_bytes, checkpoint_to_bytes  # noqa: F401 - the runner's codec
+from modsat_core.checkpoint import RunResult, checkpoint_from_bytes, checkpoint_to_bytes  # noqa: F401 - the runner's codec
 from modsat_core.train import train as _train
 from modsat_core.verify import add_verification
 from web.recording import add_recording

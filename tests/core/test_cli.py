@@ -8,7 +8,7 @@ import pytest
 
 
 def modsat(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "modsat_core.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "server.cli", *args], capture_output=True, text=True,
                           timeout=120, cwd=cwd)
 
 
@@ -63,7 +63,7 @@ def test_train_and_eval_commands(tmp_path):
     out = tmp_path / "run"
     r = modsat("train", str(spec_file), "--out", str(out), "--steps", "160")
     assert r.returncode == 0, r.stderr
-    assert "policy" in r.stdout and "PD baseline" in r.stdout or "valid=False" in r.stdout
+    assert ("policy" in r.stdout and "PD baseline" in r.stdout) or "valid=False" in r.stdout
     names = {p.name for p in out.iterdir()}
     assert {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.json", "trajectories.json",
             "policy.pt"} <= names
@@ -114,7 +114,7 @@ def test_sigterm_stops_train_at_a_checkpoint_that_resumes(tmp_path):
     spec_file.write_text(tiny_spec(training__total_env_steps=200_000, training__checkpoint_every_steps=160,
                                    training__eval_every_steps=100_000).model_dump_json())
     out = tmp_path / "run"
-    p = subprocess.Popen([sys.executable, "-m", "modsat_core.cli", "train", str(spec_file), "--out", str(out)],
+    p = subprocess.Popen([sys.executable, "-m", "server.cli", "train", str(spec_file), "--out", str(out)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while not (out / "checkpoint.pt").exists() and time.monotonic() < deadline and p.poll() is None:
@@ -127,7 +127,7 @@ def test_sigterm_stops_train_at_a_checkpoint_that_resumes(tmp_path):
 
 def test_a_closed_pipe_is_silent():
     """`modsat schema | head -c 10`: the reader has left; no 'Broken pipe' message, no traceback."""
-    p = subprocess.Popen([sys.executable, "-m", "modsat_core.cli", "schema"], stdout=subprocess.PIPE,
+    p = subprocess.Popen([sys.executable, "-m", "server.cli", "schema"], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE)
     p.stdout.close()  # before the 23 kB of schema are written
     err = p.stderr.read().decode()
@@ -138,7 +138,7 @@ def test_a_closed_pipe_is_silent():
 def test_progress_eta_follows_the_recent_rate():
     import io
 
-    from modsat_core.cli import _ProgressBar
+    from server.cli import _ProgressBar
 
     clock = [0.0]
     bar = _ProgressBar(io.StringIO())

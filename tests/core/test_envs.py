@@ -61,7 +61,7 @@ def test_reset_options_fix_initial_target_and_rate():
     env = SatelliteSlewEnv(spec=SHORT)
     q_TN = np.array([np.cos(0.5), 0.0, np.sin(0.5), 0.0])  # 57.3 deg about y
     q_BN = np.array([1.0, 0.0, 0.0, 0.0])
-    obs, info = env.reset(seed=1, options={"q_BN": q_BN, "q_TN": q_TN, "omega_B": [0.01, 0.0, 0.0]})
+    _obs, info = env.reset(seed=1, options={"q_BN": q_BN, "q_TN": q_TN, "omega_B": [0.01, 0.0, 0.0]})
     np.testing.assert_allclose(info["q_TN"], q_TN)
     np.testing.assert_allclose(info["omega_B"], [0.01, 0.0, 0.0])
     assert info["error_deg"] == pytest.approx(np.degrees(1.0))

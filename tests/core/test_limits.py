@@ -22,9 +22,9 @@ def _spec(**sections):
 
 
 def test_constants_agree_with_the_code():
+    from modsat_core.checkpoint import replay_buffer_bytes
     from modsat_core.features import N_FEATURES
     from modsat_core.networks import SET_CELL_WIDTH
-    from modsat_core.train import replay_buffer_bytes
 
     assert limits.N_FEATURES == N_FEATURES and limits.SET_CELL_WIDTH == SET_CELL_WIDTH
     for n in (2, 3, 5, 10):
@@ -53,7 +53,7 @@ def test_replay_estimate_is_the_issue_figure():
 
 
 def test_check_cli_is_readable(tmp_path):
-    from modsat_core.cli import main
+    from server.cli import main
 
     path = tmp_path / "big.json"
     d = get_preset("quick").model_dump(mode="json")

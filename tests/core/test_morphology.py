@@ -4,9 +4,18 @@ import numpy as np
 import pytest
 import torch
 
+from modsat_core.grid import (
+    ACTUATOR,
+    STRUCTURE,
+    is_connected,
+    is_valid,
+    validity_problem,
+)
 from modsat_core.morphology import (
-    ACTUATOR, STRUCTURE, is_connected, is_valid, mass_properties, mass_properties_batched,
-    seed_component_batched, valid_mask_batched, validity_problem,
+    mass_properties,
+    mass_properties_batched,
+    seed_component_batched,
+    valid_mask_batched,
 )
 
 A, M = 0.1, 1.0

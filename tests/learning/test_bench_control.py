@@ -8,11 +8,11 @@ import numpy as np
 import torch
 
 from modsat_core.bench_control import flat_state
-from modsat_core.cli import main
 from modsat_core.envs import reference_design
 from modsat_core.features import N_COMMON, N_DESIGN, PhysState, cell_observation
 from modsat_core.mission import draw_episode
 from modsat_core.slew import Design, SlewSim
+from server.cli import main
 
 
 def test_flat_state_is_what_an_actuator_cell_sees(tiny):

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from modsat_core.bench_update import bench_update
-from modsat_core.cli import main
+from server.cli import main
 
 
 def test_report_has_every_network_and_its_ratio_to_flat_per_grid():

@@ -5,9 +5,10 @@ the `quick` mission (30-90 deg slews, 1 deg and 0.01 rad/s at the end of 120 ste
 the CPU presets' recipe: the finer error and rate features, [256, 256], lr 1e-3, one update
 per env step, exploration noise falling to zero, and the hold reward (no progress penalty
 inside the cone, the settle bonus), 40k env steps. docs/learning.md, "Fourth round", runs
-e6 and e24 (this test's run): success 56 % at 20k steps, 97 % at 25k (32 slews). Before this recipe no run of this mission landed a
-slew in the evaluation; the untrained controller lands none, so 75 % over 32 slews cannot
-come by chance. The co-design network's own control-only run (e13) is in the same table.
+e6 and e24 (this test's run): success 56 % at 20k steps, 97 % at 25k (32 slews). Before this
+recipe no run of this mission landed a slew in the evaluation; the untrained controller lands
+none, so 75 % over 32 slews cannot come by chance. The co-design network's own control-only
+run (e13) is in the same table.
 """
 
 from __future__ import annotations

@@ -10,11 +10,11 @@ import pytest
 import torch
 
 from modsat_core.evaluate import episode_rngs
+from modsat_core.features import N_FEATURES
 from modsat_core.mission import draw_episode
+from modsat_core.networks import NETWORKS, make_actor
 from modsat_core.policy import PolicyController, export_torchscript
 from modsat_core.slew import Design, SlewSim
-from modsat_core.features import N_FEATURES
-from modsat_core.networks import NETWORKS, make_actor
 
 from .conftest import tiny_spec
 
@@ -67,7 +67,7 @@ def test_a_crafted_policy_file_is_refused_without_running_it(tmp_path):
     import io
     import os
 
-    from modsat_core.train import load_policy
+    from modsat_core.policy_file import load_policy
 
     buf = io.BytesIO()
     torch.save({"format": "modsat-policy", "payload": _Payload()}, buf)

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from modsat_core.features import N_COMMON, N_DESIGN, N_FEATURES, PhysState, cell_observation
+from modsat_core.features import (
+    N_COMMON,
+    N_DESIGN,
+    N_FEATURES,
+    PhysState,
+    cell_observation,
+)
 
 
 def _batch():

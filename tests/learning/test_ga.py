@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from modsat_core.ga import mutate, survivor_count
-from modsat_core.morphology import is_valid
+from modsat_core.grid import is_valid
 from modsat_core.train import train
 
 from .conftest import tiny_spec

@@ -58,10 +58,10 @@ def test_worst_valid_episodes_still_beat_an_invalid_one():
 
 
 def test_with_repair_every_grown_design_flies():
-    from modsat_core.morphology import is_valid
-    from modsat_core.policy import design_with
     from modsat_core.features import N_FEATURES
+    from modsat_core.grid import is_valid
     from modsat_core.networks import CellActor
+    from modsat_core.policy import design_with
 
     spec = tiny_spec(design__repair=True)
     env = CoDesignEnv(spec, 16, seed=0)

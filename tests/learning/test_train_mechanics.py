@@ -8,12 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from modsat_core.morphology import is_valid
-from modsat_core.networks import NETWORKS
-from modsat_core.train import (
-    checkpoint_from_bytes, checkpoint_to_bytes, load_policy, replay_buffer_bytes, replay_fields, train,
+from modsat_core.checkpoint import (
+    checkpoint_from_bytes,
+    checkpoint_to_bytes,
+    replay_buffer_bytes,
+    replay_fields,
 )
+from modsat_core.grid import is_valid
+from modsat_core.networks import NETWORKS
+from modsat_core.policy_file import load_policy
 from modsat_core.td3 import ReplayBuffer
+from modsat_core.train import train
 
 from .conftest import tiny_spec
 
@@ -130,7 +135,7 @@ def test_a_policy_file_from_before_the_network_choice_is_refused_with_a_reason()
     old = {k: v for k, v in d.items() if k != "network"} | {"version": 1, "n_features": 47}
     buf = io.BytesIO()
     torch.save(old, buf)
-    with pytest.raises(ValueError, match="older modsat.*train the run again"):
+    with pytest.raises(ValueError, match=r"older modsat.*train the run again"):
         load_policy(buf.getvalue())
 
 
@@ -138,7 +143,7 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
     """`design_exploration_episodes`: an episode drawn as unexplored grows exactly the design
     the deterministic actor grows (no swaps, no noise); explored ones differ."""
     from modsat_core.policy import design_with
-    from modsat_core.train import TD3Run
+    from modsat_core.td3_run import TD3Run
 
     def grown(share: float) -> tuple[list, np.ndarray]:
         spec = tiny_spec(training__learning_starts=0, training__design_exploration=0.5,
@@ -146,7 +151,7 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
         run = TD3Run(spec)
         for _ in range(spec.design.design_steps):
             run.env.step(run._act(run.env.observe()))
-        return [g for g in run.env.grids.numpy()], design_with(run.agent.actor, spec)
+        return list(run.env.grids.numpy()), design_with(run.agent.actor, spec)
 
     grids, own = grown(0.0)
     assert all(np.array_equal(g, own) for g in grids)
@@ -157,7 +162,7 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
 def test_design_layers_hold_until_design_learning_starts():
     """The set network's design layers do not move before `design_learning_starts`; the control
     layers do; and after it the design layers learn."""
-    from modsat_core.train import TD3Run
+    from modsat_core.td3_run import TD3Run
 
     spec = tiny_spec(training__network="set", design__repair=True, training__design_learning_starts=10**6)
     run = TD3Run(spec)

@@ -71,7 +71,7 @@ class ServerProc(HttpProc):
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         self.log_path = log_path
-        self._log = open(log_path, "wb")  # noqa: SIM115 - closed in stop()
+        self._log = open(log_path, "wb")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "uvicorn", "server.app:create_app", "--factory", "--host", "127.0.0.1",
              "--port", str(self.port), "--timeout-graceful-shutdown", "2"],
@@ -92,7 +92,8 @@ def start_server(tmp_path, request):
         return ServerProc(db_url, tmp_path / f"server{i}.log", env)
 
     yield from process_factory(
-        request, make, lambda s: f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}")
+        request, make,
+        lambda s: f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}")
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])

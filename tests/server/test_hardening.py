@@ -60,11 +60,11 @@ def test_same_origin_and_non_browser_writes_work(api):
 def test_foreign_host_header_is_refused_for_reads_too(api):
     """DNS rebinding: a page on evil.example whose name resolves to 127.0.0.1 would read everything."""
     for path in ("/api/jobs", "/api/health", "/"):
-        r = _raw(api, "GET", path, host="evil.example:%d" % api.port)
+        r = _raw(api, "GET", path, host=f"evil.example:{api.port}")
         assert r.status_code == 400 and "MODSAT_ALLOWED_HOSTS" in r.json()["detail"], path
     for host in (f"localhost:{api.port}", f"127.0.0.1:{api.port}", "localhost"):
         assert _raw(api, "GET", "/api/health", host=host).status_code == 200, host
-    assert _raw(api, "GET", "/api/health", host="[::1]:%d" % api.port).status_code == 200
+    assert _raw(api, "GET", "/api/health", host=f"[::1]:{api.port}").status_code == 200
     assert _raw(api, "GET", "/api/health", host="a:b:c").status_code == 400
 
 

@@ -23,7 +23,7 @@ class Serve:
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         self.log_path = log
-        self._log = open(log, "wb")  # noqa: SIM115
+        self._log = open(log, "wb")
         self.proc = subprocess.Popen(
             [MODSAT, "serve", "--workers", str(workers), "--data-dir", str(data_dir), "--port", str(self.port),
              "--runner", "simulated"],

@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 import torch
 
-from modsat_core import cli
 from modsat_core.evaluate import monte_carlo
 from modsat_core.morphology import mass_properties
 from modsat_core.pd import PDController
 from modsat_core.presets import get_preset
 from modsat_core.slew import Design
 from modsat_core.spec import JobSpec
+from server import cli
 
 #: Largest attitude difference (rad) at dt = 1/240 s: measured 9.2e-8 (PD) and 2.7e-7 (policy).
 BOUND_RAD = 1e-6

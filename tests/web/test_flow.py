@@ -16,7 +16,13 @@ import pytest
 
 from tests.worker.helpers import wait_for
 
-from .conftest import DESKTOP, Serve, actuator_pixels, close_webgl_notice, screenshot_dir
+from .conftest import (
+    DESKTOP,
+    Serve,
+    actuator_pixels,
+    close_webgl_notice,
+    screenshot_dir,
+)
 
 # A GA baseline small enough for CI (about 15 s on 2 cores), submitted over the API.
 TINY_GA = {"preset": "quick", "overrides": {

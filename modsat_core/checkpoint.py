@@ -1,0 +1,98 @@
+"""The run contract's pieces: callbacks, the result, checkpoints and the replay layout.
+
+What :func:`modsat_core.train.train` takes and gives back (docs/train-interface.md), the
+checkpoint codec, and the compact layout of a replay-buffer row (shared by training, the
+memory limits and the tests).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import torch
+
+from .spec import UnrunnableSpec
+
+ProgressFn = Callable[[dict], None]
+CheckpointFn = Callable[[dict], None]
+StopFn = Callable[[], bool]
+
+#: The replay buffer goes into checkpoints only up to this size (bigger buffers are refilled
+#: after a resume: learning restarts after ``learning_starts`` fresh transitions).
+CHECKPOINT_BUFFER_LIMIT_BYTES = 256 * 2**20
+CHECKPOINT_VERSION = 2
+
+def resolve_device(name: str) -> str:
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise UnrunnableSpec("training.device is 'cuda' but torch sees no GPU on this machine; "
+                             "use 'auto' or 'cpu'")
+    return name
+
+
+def checkpoint_to_bytes(ckpt: dict) -> bytes:
+    buf = io.BytesIO()
+    torch.save(ckpt, buf)
+    return buf.getvalue()
+
+
+def checkpoint_from_bytes(data: bytes) -> dict:
+    return torch.load(io.BytesIO(data), map_location="cpu", weights_only=False)
+
+
+def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
+    """The compact transition layout: two compact states, the action, reward, terminal, and
+    ``done`` (the episode ended there, also by its time limit: where n-step returns stop)."""
+    C = N**3
+    state = {"grid": ((C,), torch.uint8), "design_step": ((), torch.int16), "q_BN": ((4,), torch.float32),
+             "q_TN": ((4,), torch.float32), "omega_B": ((3,), torch.float32), "h_cells": ((C, 3), torch.float16)}
+    fields = {f"obs_{k}": v for k, v in state.items()}
+    fields.update({f"next_{k}": v for k, v in state.items()})
+    fields.update({"action": ((C, 3), torch.float16), "reward": ((), torch.float32), "terminal": ((), torch.bool),
+                   "done": ((), torch.bool)})
+    return fields
+
+
+def replay_buffer_bytes(N: int, capacity: int) -> int:
+    """Memory of a full replay buffer of ``capacity`` transitions on an N^3 grid."""
+    return capacity * sum(
+        math.prod(shape) * torch.empty((), dtype=dt).element_size() for shape, dt in replay_fields(N).values()
+    )
+
+
+@dataclass
+class RunResult:
+    """What :func:`train` returns. ``artifacts()`` is empty for a stopped run."""
+
+    stopped: bool
+    env_steps: int
+    curve: list[dict] = field(default_factory=list)
+    files: dict[str, bytes] = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
+
+    def artifacts(self) -> dict[str, bytes]:
+        return dict(self.files)
+
+
+def to_cpu(x):
+    if isinstance(x, torch.Tensor):
+        return x.detach().cpu()
+    if isinstance(x, dict):
+        return {k: to_cpu(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [to_cpu(v) for v in x]
+    return x
+
+
+def to_device(x, device):
+    if isinstance(x, torch.Tensor):
+        return x.to(device)
+    if isinstance(x, dict):
+        return {k: to_device(v, device) for k, v in x.items()}
+    if isinstance(x, list):
+        return [to_device(v, device) for v in x]
+    return x

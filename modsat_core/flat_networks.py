@@ -1,0 +1,36 @@
+"""Plain MLP actor / critic pairs for flat observations: gymnasium tasks (td3_gym) and the
+flat controller of ``bench control``. They follow the protocol of :class:`modsat_core.td3.TD3`.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from .networks import mlp
+
+
+class MLPActor(nn.Module):
+    """Deterministic actor for flat observations; actions in [-1, 1]^act_dim."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
+        super().__init__()
+        self.net = mlp([obs_dim, *hidden, act_dim])
+
+    def forward(self, obs: Tensor) -> Tensor:
+        return torch.tanh(self.net(obs))
+
+    @staticmethod
+    def finish(obs: Tensor, action: Tensor) -> Tensor:
+        return action.clamp(-1.0, 1.0)
+
+
+class MLPCritic(nn.Module):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
+        super().__init__()
+        self.q1 = mlp([obs_dim + act_dim, *hidden, 1])
+        self.q2 = mlp([obs_dim + act_dim, *hidden, 1])
+
+    def forward(self, obs: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
+        xa = torch.cat((obs, action), dim=-1)
+        return self.q1(xa).squeeze(-1), self.q2(xa).squeeze(-1)

@@ -1,0 +1,69 @@
+"""The design grid without torch: cell types and validity.
+
+A design is an integer grid ``(N, N, N)``: 0 empty, 1 structure, 2 actuator (a 3-axis
+reaction-wheel unit). It is *valid* when its modules are face-connected (6-neighbourhood)
+and it has at least one actuator. numpy only, so that validating a spec (the API process,
+``modsat check``) and the viewer never import torch.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Cell types of a design grid.
+EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
+
+_NEIGHBOURS = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
+
+
+def as_grid(design) -> np.ndarray:
+    """A design (nested lists or array) as an int8 array of shape (N, N, N)."""
+    grid = np.asarray(design, dtype=np.int64)
+    if grid.ndim != 3 or len(set(grid.shape)) != 1:
+        raise ValueError(f"a design is an N x N x N grid; got shape {grid.shape}")
+    if grid.size and (grid.min() < 0 or grid.max() > 2):
+        raise ValueError("design cells must be 0 (empty), 1 (structure) or 2 (actuator)")
+    return grid.astype(np.int8)
+
+
+def is_connected(design) -> bool:
+    """All modules form one face-connected (6-neighbour) component; an empty grid is not."""
+    grid = as_grid(design)
+    filled = grid > 0
+    cells = np.argwhere(filled)
+    if len(cells) == 0:
+        return False
+    seen = np.zeros_like(filled)
+    stack = [tuple(cells[0])]
+    seen[stack[0]] = True
+    n = grid.shape[0]
+    count = 0
+    while stack:
+        c = stack.pop()
+        count += 1
+        for d in _NEIGHBOURS:
+            nb = (c[0] + d[0], c[1] + d[1], c[2] + d[2])
+            if all(0 <= x < n for x in nb) and filled[nb] and not seen[nb]:
+                seen[nb] = True
+                stack.append(nb)
+    return count == len(cells)
+
+
+def has_actuator(design) -> bool:
+    return bool((as_grid(design) == ACTUATOR).any())
+
+
+def validity_problem(design) -> str | None:
+    """None for a valid design, else a sentence saying what is wrong."""
+    grid = as_grid(design)
+    if not (grid > 0).any():
+        return "it has no modules"
+    if not has_actuator(grid):
+        return "it has no actuator module (type 2)"
+    if not is_connected(grid):
+        return "its modules are not face-connected"
+    return None
+
+
+def is_valid(design) -> bool:
+    return validity_problem(design) is None
