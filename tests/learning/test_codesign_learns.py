@@ -15,10 +15,14 @@ same mission); no co-design run of 10k steps lands slews yet.
 
 from __future__ import annotations
 
+import pytest
+
 from modsat_core.baselines import untrained_baselines
 from modsat_core.presets import get_preset
 from modsat_core.spec import parse_spec
 from modsat_core.train import train
+
+pytestmark = pytest.mark.slow  # trains co-design for 10k env steps (minutes)
 
 MARGIN = 100.0
 STEPS = 10_000

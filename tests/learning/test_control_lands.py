@@ -13,10 +13,14 @@ run (e13) is in the same table.
 
 from __future__ import annotations
 
+import pytest
+
 from modsat_core.bench_control import bench_control
 from modsat_core.envs import reference_design
 from modsat_core.presets import get_preset
 from modsat_core.spec import parse_spec
+
+pytestmark = pytest.mark.slow  # trains a controller for 40k env steps (minutes)
 
 
 def test_flat_controller_with_the_cpu_recipe_settles_most_slews():

@@ -12,6 +12,8 @@ import pytest
 from modsat_core.td3 import TD3Config
 from modsat_core.td3_gym import train_gym
 
+pytestmark = pytest.mark.slow  # trains TD3 on Pendulum-v1
+
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_td3_solves_pendulum(seed):

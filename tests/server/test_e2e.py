@@ -12,6 +12,9 @@ import time
 import warnings
 
 import httpx
+import pytest
+
+pytestmark = pytest.mark.slow  # a quick run through the whole service
 
 # The quick preset, cut down so that the run takes seconds on 2 cores.
 TINY_QUICK = {

@@ -10,6 +10,8 @@ from schemathesis import GenerationMode
 
 from .conftest import ServerProc
 
+pytestmark = pytest.mark.slow  # 300 generated requests against a live server
+
 
 @pytest.fixture(scope="module")
 def fuzz_server(tmp_path_factory):

@@ -25,6 +25,8 @@ from modsat_core.slew import Design
 from modsat_core.spec import JobSpec
 from server import cli
 
+pytestmark = pytest.mark.slow  # flies slews in Basilisk (about a minute)
+
 #: Largest attitude difference (rad) at dt = 1/240 s: measured 9.2e-8 (PD) and 2.7e-7 (policy).
 BOUND_RAD = 1e-6
 #: ... and with a dt Basilisk's nanosecond clock holds exactly: measured 1.4e-13.
