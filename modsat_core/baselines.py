@@ -7,6 +7,8 @@ their figures line up with ``evaluation.json`` of a finished run of the same spe
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 
@@ -45,8 +47,8 @@ def random_valid_designs(rng: np.random.Generator, N: int, count: int) -> list[n
 
 def _flown(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: int) -> dict:
     tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
-    row = {"modules": int((grid != EMPTY).sum()), "actuators": int((grid == ACTUATOR).sum()),
-           "valid": bool(is_valid(grid))}
+    row: dict[str, Any] = {"modules": int((grid != EMPTY).sum()), "actuators": int((grid == ACTUATOR).sum()),
+                           "valid": bool(is_valid(grid))}
     mc = evaluate_design(actor, grid, spec, episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
     if mc is None:
         row.update({"mean_return": effective_invalid_penalty(spec), "success_rate": 0.0})

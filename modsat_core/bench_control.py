@@ -43,7 +43,7 @@ def flat_state(sim: SlewSim) -> Tensor:
 
 
 class _Controller:
-    def __init__(self, actor: MLPActor, K: int):
+    def __init__(self, actor: torch.nn.Module, K: int):
         self.actor, self.K = actor, K
 
     def __call__(self, sim: SlewSim) -> Tensor:

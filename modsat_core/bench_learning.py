@@ -14,6 +14,7 @@ import json
 import os
 import platform
 import time
+from typing import Any
 
 import numpy as np
 import torch
@@ -101,8 +102,9 @@ def ga_spec_like(rl: JobSpec, population: int, steps_per_design: int) -> JobSpec
 def bench_rl_vs_ga(rl: JobSpec, seeds: list[int], population: int, steps_per_design: int,
                    out_dir: str | None = None, log=None) -> dict:
     ga = ga_spec_like(rl, population, steps_per_design)
-    out = {"benchmark": "rl-vs-ga", "environment": _environment(), "env_step_budget": rl.training.total_env_steps,
-           "rl_spec": rl.model_dump(mode="json"), "ga": ga.ga.model_dump(mode="json"), "runs": {"rl": [], "ga": []}}
+    out: dict[str, Any] = {"benchmark": "rl-vs-ga", "environment": _environment(),
+                           "env_step_budget": rl.training.total_env_steps, "rl_spec": rl.model_dump(mode="json"),
+                           "ga": ga.ga.model_dump(mode="json"), "runs": {"rl": [], "ga": []}}
     for rl_s, ga_s in zip(_seeded(rl, seeds), _seeded(ga, seeds)):
         out["runs"]["rl"].append(run_one(rl_s, out_dir, log))
         out["runs"]["ga"].append(run_one(ga_s, out_dir, log))

@@ -48,9 +48,10 @@ def _cases(N: int, hidden: list[int], batch: int, gen: torch.Generator) -> dict:
     terminal = torch.zeros(batch, dtype=torch.bool)
     cfg = TD3Config(actor_lr=1e-3, critic_lr=1e-3)
     flat_dim = N_CONTROL_GLOBAL + 3  # one actuator
-    out = {"flat": (TD3(MLPActor(flat_dim, 3, hidden), MLPCritic(flat_dim, 3, hidden), cfg),
-                    torch.randn(batch, flat_dim, generator=gen), torch.rand(batch, 3, generator=gen) * 2 - 1,
-                    reward, torch.randn(batch, flat_dim, generator=gen), terminal)}
+    out: dict[str, tuple] = {
+        "flat": (TD3(MLPActor(flat_dim, 3, hidden), MLPCritic(flat_dim, 3, hidden), cfg),
+                 torch.randn(batch, flat_dim, generator=gen), torch.rand(batch, 3, generator=gen) * 2 - 1,
+                 reward, torch.randn(batch, flat_dim, generator=gen), terminal)}
     obs = observe_compact(_compact_batch(N, batch, gen), N, 10, 0.5)
     nxt = observe_compact(_compact_batch(N, batch, gen), N, 10, 0.5)
     action = (torch.rand(batch, N**3, 3, generator=gen) * 2 - 1) * obs.act_mask.unsqueeze(-1)

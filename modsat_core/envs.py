@@ -93,6 +93,7 @@ class SatelliteSlewEnv(gym.Env):
     """One satellite of a given design flying slews (see the module docstring)."""
 
     metadata = {"render_modes": []}
+    observation_space: spaces.Box  # what _spaces builds (gym.Env declares the base Space)
 
     def __init__(self, spec: JobSpec | dict | None = None, design=None, dtype: str = "float64", device: str = "cpu"):
         self.spec_model, self.design = _resolve(spec, design)
@@ -128,6 +129,7 @@ class SatelliteSlewVectorEnv(gym.vector.VectorEnv):
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    single_observation_space: spaces.Box  # what _spaces builds (VectorEnv declares the base Space)
 
     def __init__(self, num_envs: int, spec: JobSpec | dict | None = None, design=None,
                  dtype: str = "float64", device: str = "cpu"):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -112,7 +113,7 @@ def monte_carlo(
         snapshot(torch.zeros(episodes, 3, dtype=sim.dtype, device=sim.device))
     for _ in range(mission.episode_steps):
         with torch.no_grad():
-            action = controller(sim)
+            action = cast(Tensor, controller(sim))  # a Controller once a class was instantiated above
         out = sim.step(action)
         if rec:
             snapshot(out.tau_c_B)
@@ -125,7 +126,7 @@ def monte_carlo(
         done |= ended
         if bool(done.all()):
             break
-    per_episode = []
+    per_episode: list[dict[str, Any]] = []
     for i in range(episodes):
         row = {k: _to_python(v[i]) for k, v in final.items()}
         row["rate_tolerance_rad_s"] = mission.rate_tolerance_rad_s

@@ -144,6 +144,7 @@ class GARun:
             if run.run(progress, checkpoint, should_stop, budget=budget):
                 return True
             self.inner_ckpt = None
+            assert run.best is not None  # a finished run has evaluated at least once
             fitness = run.best["mean_return"]
             self.used += run.env_steps
             self.records.append({"grid": grid.tolist(), "fitness": fitness, "generation": self.generation,
@@ -178,6 +179,7 @@ class GARun:
             self._next_generation()
         on_progress({"env_steps": self.used, "total_env_steps": total, "updates": 0, "phase": "evaluating",
                      "eval": None})
+        assert self.best_actor is not None  # at least one design was evaluated
         actor = actor_from_state(self.spec, self.best_actor["actor"])
         grid = np.asarray(self.best_actor["grid"], dtype=np.int64)
         extra = {"designs": self.records, "generations": self.generations}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import warnings
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import torch
@@ -21,6 +22,7 @@ from .features import (
 )
 from .grid import ACTUATOR
 from .morphology import seed_component_batched
+from .networks import CellActor, SetActor
 from .slew import SlewSim
 from .spec import JobSpec
 
@@ -75,6 +77,13 @@ class ExportedController(nn.Module):
     The design's constant per-cell features are baked in as buffers.
     """
 
+    if TYPE_CHECKING:  # the buffers' types, for mypy only: TorchScript cannot read string annotations
+        base_x: Tensor
+        occupied: Tensor
+        act_cells: Tensor
+        act_mask: Tensor
+        value_mask: Tensor
+
     def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
         super().__init__()
         N = np.asarray(grid).shape[0]
@@ -96,7 +105,7 @@ class ExportedController(nn.Module):
         self.tau_max = spec.modules.torque_scale_Nm
         cap = spec.modules.momentum_capacity_Nms
         self.h_scale = cap if cap is not None else spec.modules.torque_scale_Nm
-        self.actor = actor
+        self.actor = cast("CellActor | SetActor", actor)  # what make_actor builds; forward calls its .act
 
     def forward(self, q_BT: Tensor, omega_B: Tensor, h_B: Tensor) -> Tensor:
         B = q_BT.shape[0]

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+from typing import Any
 
 import numpy as np
 import torch
@@ -43,8 +44,8 @@ def curve_point(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, env_ste
     mc = evaluate_design(actor, grid, spec, episodes=spec.training.eval_episodes, seed=curve_seed(spec))
     n_mod = int((np.asarray(grid) != EMPTY).sum())
     n_act = int((np.asarray(grid) == ACTUATOR).sum())
-    point = {"env_steps": env_steps, "updates": updates, "valid": mc is not None, "modules": n_mod,
-             "actuators": n_act}
+    point: dict[str, Any] = {"env_steps": env_steps, "updates": updates, "valid": mc is not None,
+                             "modules": n_mod, "actuators": n_act}
     if mc is None:
         point.update({"mean_return": penalty, "success_rate": 0.0})
     else:
@@ -72,7 +73,7 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     ev = spec.evaluation
     n = episodes or ev.episodes
     tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
-    out = {"episodes": n, "seed": ev.seed, "design_valid": bool(is_valid(grid))}
+    out: dict[str, Any] = {"episodes": n, "seed": ev.seed, "design_valid": bool(is_valid(grid))}
     if not out["design_valid"]:
         pen = effective_invalid_penalty(spec)
         out["policy"] = {"summary": {"episodes": n, "success_rate": 0.0, "mean_return": pen, "std_return": 0.0},
@@ -81,7 +82,7 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
         out["trajectories"] = {"policy": [], "pd_baseline": []}
         return out
     design = Design.from_grid(grid, spec.modules)
-    kw = dict(episodes=n, seed=ev.seed, record=min(ev.trajectories, n), dtype=torch.float64)
+    kw: dict[str, Any] = dict(episodes=n, seed=ev.seed, record=min(ev.trajectories, n), dtype=torch.float64)
     mc = monte_carlo(design, PolicyController(actor, grid, spec), spec.mission, spec.modules, **kw)
     pd = monte_carlo(design, PDController, spec.mission, spec.modules, **kw)
     out["policy"] = {"summary": mc.summary(tols), "episodes": mc.episodes}

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -123,7 +124,7 @@ class SlewSim:
         """B satellites given by their inertia (B, 3, 3) and wheel-unit slots (B, K) bool."""
         self.mission, self.modules = mission, modules
         self.dtype, self.device = dtype, torch.device(device)
-        kw = dict(dtype=dtype, device=self.device)
+        kw: dict[str, Any] = dict(dtype=dtype, device=self.device)
         I_B = torch.as_tensor(I_B, **kw).clone()
         mask = torch.as_tensor(actuator_mask, dtype=torch.bool, device=self.device).clone()
         self.B, self.K = mask.shape
@@ -174,7 +175,7 @@ class SlewSim:
     def reset(self, idx: Tensor | list[int], draws: list[EpisodeDraw]) -> None:
         """Start new episodes for satellites ``idx`` (len b) from ``draws`` (len b)."""
         idx = torch.as_tensor(idx, dtype=torch.long, device=self.device)
-        kw = dict(dtype=self.dtype, device=self.device)
+        kw: dict[str, Any] = dict(dtype=self.dtype, device=self.device)
         st = self.state
         q_BN = torch.tensor(np.stack([d.q_BN for d in draws]), **kw)
         st.q_BN[idx] = q_BN

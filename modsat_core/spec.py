@@ -13,12 +13,8 @@ from __future__ import annotations
 import json
 from typing import Annotated, Any, Literal
 
-from pydantic import (
-    Field,
-    ValidationError,
-    field_validator,
-    model_validator,
-)
+from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic_core import ErrorDetails
 
 from .spec_sections import (
     PAPER_TAU_3X3X3_NM,
@@ -47,7 +43,7 @@ __all__ = [
     "parse_spec",
 ]
 
-SPEC_VERSION = 1
+SPEC_VERSION: Literal[1] = 1
 
 
 class Training(_Section):
@@ -220,7 +216,7 @@ class UnrunnableSpec(ValueError):
 class SpecError(ValueError):
     """A spec that failed validation; ``messages`` has one readable line per problem."""
 
-    def __init__(self, messages: list[str], errors: list[dict[str, Any]] | None = None):
+    def __init__(self, messages: list[str], errors: list[ErrorDetails] | None = None):
         self.messages = messages
         self.errors = errors or []
         super().__init__("invalid spec:\n  " + "\n  ".join(messages))

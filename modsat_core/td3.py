@@ -56,7 +56,9 @@ class TD3:
         with torch.no_grad():
             next_a = self.actor_target(next_obs)
             noise = torch.randn(next_a.shape, generator=generator, device=next_a.device) * cfg.policy_noise
-            next_a = self.actor_target.finish(next_obs, next_a + noise.clamp(-cfg.noise_clip, cfg.noise_clip))
+            # finish: a static method of each actor class; typed nn.Module, mypy sees __getattr__'s Tensor | Module.
+            next_a = self.actor_target.finish(  # type: ignore[operator]
+                next_obs, next_a + noise.clamp(-cfg.noise_clip, cfg.noise_clip))
             q1_t, q2_t = self.critic_target(next_obs, next_a)
             gamma = cfg.gamma if discount is None else discount
             y = reward + gamma * (1.0 - terminal.to(reward.dtype)) * torch.minimum(q1_t, q2_t)

@@ -19,7 +19,7 @@ from .td3 import TD3, ReplayBuffer, TD3Config
 GYM_TD3 = TD3Config(actor_lr=1e-3, critic_lr=1e-3)
 
 
-def evaluate_gym(env_id: str, actor: MLPActor, scale: np.ndarray, episodes: int, seed: int) -> float:
+def evaluate_gym(env_id: str, actor: torch.nn.Module, scale: np.ndarray, episodes: int, seed: int) -> float:
     """Mean undiscounted return of the deterministic policy over seeded episodes."""
     env = gym.make(env_id)
     returns = []
@@ -60,9 +60,11 @@ def train_gym(
     rng = np.random.default_rng(seed)
     gen = torch.Generator().manual_seed(seed)
     env = gym.make(env_id)
-    obs_dim = env.observation_space.shape[0]
-    act_dim = env.action_space.shape[0]
-    scale = env.action_space.high.astype(np.float32)
+    obs_space, act_space = env.observation_space, env.action_space
+    assert obs_space.shape is not None and isinstance(act_space, gym.spaces.Box)  # flat observations, Box actions
+    obs_dim = obs_space.shape[0]
+    act_dim = act_space.shape[0]
+    scale = act_space.high.astype(np.float32)
     agent = TD3(MLPActor(obs_dim, act_dim, list(hidden)), MLPCritic(obs_dim, act_dim, list(hidden)), cfg)
     buf = ReplayBuffer({"obs": ((obs_dim,), torch.float32), "act": ((act_dim,), torch.float32),
                         "rew": ((), torch.float32), "next_obs": ((obs_dim,), torch.float32),

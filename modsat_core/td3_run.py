@@ -202,6 +202,7 @@ class TD3Run:
     def best_actor(self) -> tuple[torch.nn.Module, np.ndarray]:
         """The snapshot the final evaluation uses (best success rate on the curve, then best
         return), and its design."""
+        assert self.best is not None  # run() evaluates at least once before it returns False
         return actor_from_state(self.spec, self.best["actor"]), self.best["grid"]
 
     # ------------------------------------------------------------------ checkpoint

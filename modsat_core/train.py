@@ -69,5 +69,6 @@ def train(
     on_progress({"env_steps": run.env_steps, "total_env_steps": spec.training.total_env_steps,
                  "updates": run.agent.updates, "phase": "evaluating", "eval": None})
     actor, grid = run.best_actor()
+    assert run.best is not None  # best_actor() needs it too
     files, summary = run_files(spec, run.curve, actor, grid, {"best_env_steps": run.best["env_steps"]})
     return RunResult(stopped=False, env_steps=run.env_steps, curve=run.curve, files=files, summary=summary)

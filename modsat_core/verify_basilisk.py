@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -138,7 +139,7 @@ class BasiliskSatellite:
         self.sim.AddModelToTask(task, residual)
 
         self.rw_groups: list[tuple] = []  # (effector, command message, payload, wheel count)
-        self.body_torque = None
+        self.body_torque: Any = None  # Basilisk's (untyped) ExtForceTorque when there are no wheels
         if self.has_wheels:
             self._add_wheels(sc, task, draw, messaging)
         else:  # the paper's ideal torque: the command acts on the body directly

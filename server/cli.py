@@ -263,8 +263,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     ckpt_path = os.path.join(out, "checkpoint.pt")
     checkpoint = None
     if args.resume and os.path.exists(ckpt_path):
-        with open(ckpt_path, "rb") as fh:
-            checkpoint = checkpoint_from_bytes(fh.read())
+        with open(ckpt_path, "rb") as ckpt_fh:
+            checkpoint = checkpoint_from_bytes(ckpt_fh.read())
         print(f"resuming from {ckpt_path} at {checkpoint['env_steps']:,} env steps", file=sys.stderr)
     stop = {"flag": False}
 

@@ -7,7 +7,7 @@ import asyncio
 import json
 import re
 import time
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, HTTPException, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
@@ -45,7 +45,7 @@ _SUBMIT_BODY = {
         },
     }},
 }
-_ERRORS = {404: {"description": "Unknown job"}}
+_ERRORS: dict[int | str, dict[str, Any]] = {404: {"description": "Unknown job"}}
 
 
 def _unknown(job_id: int) -> HTTPException:
@@ -93,7 +93,9 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
     def create() -> JobDetail:
         job_id = store.submit(spec.model_dump_json(), name=spec.name, algorithm=spec.algorithm,
                               total_env_steps=spec.training.total_env_steps, max_attempts=settings.max_attempts)
-        return _detail(store, job_id)
+        job = _detail(store, job_id)
+        assert job is not None  # the row was just inserted
+        return job
 
     job = await run_in_threadpool(create)
     return JSONResponse(job.model_dump(mode="json"), status_code=201, headers={"Location": job.url})
@@ -109,7 +111,7 @@ def list_jobs(
         "Only jobs with a smaller id: the cursor `next_before_id` of the previous page."))] = None,
 ) -> JobList:
     """Jobs, newest first, one page at a time (by `offset`, or by the `before_id` cursor)."""
-    statuses = list(status) if status else None
+    statuses: list[str] | None = list(status) if status else None
     total, rows = store.list_jobs(statuses=statuses, limit=limit + 1, offset=offset, before_id=before_id)
     more, rows = len(rows) > limit, rows[:limit]
     nxt = offset + len(rows) if before_id is None and offset + len(rows) < total else None

@@ -344,7 +344,8 @@ class ViewerApp:
         self._cache_lock = threading.Lock()
         self._stop = threading.Event()
         self.server.on_client_connect(self._connect)
-        self.server.on_client_disconnect(lambda client: self.sessions.pop(client.client_id, None))
+        # viser's stub wants a callback returning None; it drops a sync callback's return value (the session).
+        self.server.on_client_disconnect(lambda client: self.sessions.pop(client.client_id, None))  # type: ignore[type-var]
         self._ticker = threading.Thread(target=self._tick_loop, name="modsat-viewer-playback", daemon=True)
         self._ticker.start()
 

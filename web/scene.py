@@ -21,10 +21,14 @@ Layout of one satellite under ``prefix`` (e.g. ``/A``)::
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from modsat_core.grid import ACTUATOR, EMPTY
+
+if TYPE_CHECKING:  # viser is imported where a scene is drawn, not here
+    from viser import FrameHandle
 
 #: sRGB colours (0-255). The actuator colour is what the browser tests look for.
 STRUCTURE_SRGB = (150, 150, 150)
@@ -96,8 +100,8 @@ class Voxels:
 class SatelliteHandles:
     """What a drawn satellite exposes for animation."""
 
-    body: object  # viser FrameHandle (wxyz = q_BN)
-    target: object  # viser FrameHandle (wxyz = q_TN)
+    body: FrameHandle  # wxyz = q_BN
+    target: FrameHandle  # wxyz = q_TN
     radius: float
 
     def set_attitude(self, q_BN, q_TN=None) -> None:

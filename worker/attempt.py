@@ -71,6 +71,7 @@ class Attempt:
 
     # ------------------------------------------------------------------ heartbeat thread
     def _heartbeat_loop(self) -> None:
+        assert self.s.heartbeat_s is not None  # WorkerSettings' validator sets it
         period = float(self.s.heartbeat_s)
         next_reap = time.monotonic() + self.s.lease_s
         while not self.flags.done.wait(period):
@@ -134,6 +135,7 @@ class Attempt:
                 if proc.is_alive():
                     proc.kill()
                 proc.join(10)
+                assert reader is not None  # opened before proc was made
                 reader.close()
             beat.join(10)
 

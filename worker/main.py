@@ -60,6 +60,7 @@ class Worker:
     def run(self, *, max_jobs: int | None = None, idle_exit_s: float | None = None) -> int:
         """Work until stopped (or ``max_jobs`` attempts, or idle for ``idle_exit_s``). Returns 0."""
         ttl = max(self.s.lease_s, 3 * self.s.poll_s)
+        assert self.s.heartbeat_s is not None  # WorkerSettings' validator sets it
         if not self._start(ttl):
             return 0
         log.info("worker %s: database %s, runner %s, lease %.1f s", self.id, self.store.url_for_humans,

@@ -23,7 +23,7 @@ import time
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, overload
 
 from sqlalchemy import (
     Connection,
@@ -573,6 +573,10 @@ def _drop_checkpoint(conn: Connection, job_id: int) -> None:
     conn.execute(update(jobs).where(jobs.c.id == job_id).values(checkpoint_env_steps=None))
 
 
+@overload
+def _no_nul(text: str) -> str: ...
+@overload
+def _no_nul(text: None) -> None: ...
 def _no_nul(text: str | None) -> str | None:
     """Error text from a training may hold NUL characters, which PostgreSQL text cannot store."""
     return None if text is None else text.replace("\x00", "\\x00")
