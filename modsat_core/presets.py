@@ -7,7 +7,8 @@ choice, written here and in docs/spec.md.
 
 from __future__ import annotations
 
-from .spec import PAPER_TAU_3X3X3_NM, PAPER_TAU_5X5X5_NM, JobSpec
+from .spec import JobSpec
+from .spec_sections import PAPER_TAU_3X3X3_NM, PAPER_TAU_5X5X5_NM
 
 _PAPER_TRAINING = {
     "total_env_steps": 1_000_000,

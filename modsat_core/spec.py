@@ -16,32 +16,10 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_core import ErrorDetails
 
-from .spec_sections import (
-    PAPER_TAU_3X3X3_NM,
-    PAPER_TAU_5X5X5_NM,
-    DesignSpace,
-    Mission,
-    ModuleCatalog,
-    RewardSpec,
-    _Section,
-)
+from .spec_sections import DesignSpace, Mission, ModuleCatalog, RewardSpec, _Section
 
-__all__ = [
-    "GA",
-    "PAPER_TAU_3X3X3_NM",
-    "PAPER_TAU_5X5X5_NM",
-    "DesignSpace",
-    "Evaluation",
-    "JobSpec",
-    "Mission",
-    "ModuleCatalog",
-    "RewardSpec",
-    "SpecError",
-    "Training",
-    "UnrunnableSpec",
-    "format_errors",
-    "parse_spec",
-]
+__all__ = ["GA", "DesignSpace", "Evaluation", "JobSpec", "Mission", "ModuleCatalog", "RewardSpec", "SpecError",
+           "Training", "UnrunnableSpec", "format_errors", "parse_spec"]
 
 SPEC_VERSION: Literal[1] = 1
 

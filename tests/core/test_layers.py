@@ -134,3 +134,8 @@ def test_validating_a_spec_and_drawing_the_scene_load_no_torch():
     )
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
+
+
+def test_every_modsat_core_module_is_under_300_lines():
+    sizes = {p.name: len(p.read_text().splitlines()) for p in (ROOT / "modsat_core").glob("*.py")}
+    assert {k: v for k, v in sizes.items() if v >= 300} == {}
