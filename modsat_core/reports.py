@@ -46,11 +46,14 @@ def curve_point(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, env_ste
     n_act = int((np.asarray(grid) == ACTUATOR).sum())
     point: dict[str, Any] = {"env_steps": env_steps, "updates": updates, "valid": mc is not None,
                              "modules": n_mod, "actuators": n_act}
+    # Success at the mission's tolerance and at the reported ones (0.25 and 1 deg), so that a
+    # curve shows how close to the paper's 0.25 deg a run that lands at 1 deg is.
+    tol_keys = [f"success_rate_at_{t:g}_deg" for t in REPORT_TOLERANCES_DEG]
     if mc is None:
-        point.update({"mean_return": penalty, "success_rate": 0.0})
+        point.update({"mean_return": penalty, "success_rate": 0.0, **dict.fromkeys(tol_keys, 0.0)})
     else:
-        s = mc.summary()
-        point.update({k: s[k] for k in ("mean_return", "success_rate", "median_final_error_deg",
+        s = mc.summary(REPORT_TOLERANCES_DEG)
+        point.update({k: s[k] for k in ("mean_return", "success_rate", *tol_keys, "median_final_error_deg",
                                         "median_slew_time_ratio")})
     return point
 
@@ -102,7 +105,12 @@ def curve_png(curve: list[dict], title: str) -> bytes:
     ax1.plot(x, [p["mean_return"] for p in curve], marker="o", ms=3)
     ax1.set_xlabel("environment steps")
     ax1.set_ylabel("mean evaluation return")
-    ax2.plot(x, [100 * p["success_rate"] for p in curve], marker="o", ms=3, color="tab:green")
+    ax2.plot(x, [100 * p["success_rate"] for p in curve], marker="o", ms=3, color="tab:green", label="mission")
+    for tol, style in zip(REPORT_TOLERANCES_DEG, ("--", ":")):
+        key = f"success_rate_at_{tol:g}_deg"
+        if any(key in p for p in curve):
+            ax2.plot(x, [100 * p.get(key, 0.0) for p in curve], style, color="tab:green", label=f"{tol:g} deg")
+    ax2.legend(fontsize=7, loc="upper left")
     ax2.set_xlabel("environment steps")
     ax2.set_ylabel("success rate (%)")
     ax2.set_ylim(-5, 105)

@@ -36,6 +36,9 @@ def test_run_writes_every_output(network):
     assert files["curve.png"][:8] == b"\x89PNG\r\n\x1a\n"
     curve = json.loads(files["curve.json"])["points"]
     assert [p["env_steps"] for p in curve] == [160, 320, 480]
+    # success at the mission's tolerance and at 0.25 and 1 deg: never more slews at a tighter one
+    for p in curve:
+        assert 0.0 <= p["success_rate_at_0.25_deg"] <= p["success_rate_at_1_deg"] <= 1.0
     ev = json.loads(files["evaluation.json"])
     assert ev["policy"]["summary"]["episodes"] == 3
     design = json.loads(files["design.json"])

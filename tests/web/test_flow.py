@@ -112,7 +112,9 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     page.wait_for_function("document.querySelector('#d-status').textContent === 'succeeded'")
     page.wait_for_selector("#downloads a[href$='evaluation.viser']")
     page.wait_for_function("Number(document.querySelector('#curves').dataset.points) >= 1")
-    assert page.locator("#curves svg.chart path").count() == 2, "return and success-rate curves are drawn"
+    names = page.locator("#curves svg.chart path").evaluate_all("ps => ps.map(p => p.dataset.name)")
+    # the return, and success at the mission's 1 deg and at the paper's 0.25 deg
+    assert len(names) == 3 and "policy, within 0.25 deg" in names, names
     # The table comes from its own fetch, after the file list: the curves (drawn live from the
     # progress events already) say nothing about it.
     page.wait_for_selector("#evaluation table.eval")
