@@ -65,9 +65,7 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
     sim = SlewSim.from_designs([design] * B, m, spec.modules, dtype=torch.float32)
     sim.reset(list(range(B)), [draw_episode(r, m) for r in rngs])
     obs_dim, act_dim = flat_state(sim).shape[1], 3 * K
-    agent = TD3(MLPActor(obs_dim, act_dim, hidden), MLPCritic(obs_dim, act_dim, hidden), TD3Config(
-        gamma=t.gamma, tau=t.tau, policy_noise=t.policy_noise, noise_clip=t.noise_clip, policy_delay=t.policy_delay,
-        actor_lr=t.actor_lr, critic_lr=t.critic_lr))
+    agent = TD3(MLPActor(obs_dim, act_dim, hidden), MLPCritic(obs_dim, act_dim, hidden), TD3Config.from_training(t))
     buf = ReplayBuffer({"o": ((obs_dim,), torch.float32), "a": ((act_dim,), torch.float32),
                         "r": ((), torch.float32), "o2": ((obs_dim,), torch.float32), "d": ((), torch.bool)},
                        capacity=min(t.buffer_size, max(t.total_env_steps, t.batch_size)))

@@ -29,6 +29,12 @@ class TD3Config:
     actor_lr: float = 3e-4
     critic_lr: float = 3e-3
 
+    @classmethod
+    def from_training(cls, t) -> TD3Config:
+        """The update's settings of a spec's ``training`` section (the one place they are read)."""
+        return cls(gamma=t.gamma, tau=t.tau, policy_noise=t.policy_noise, noise_clip=t.noise_clip,
+                   policy_delay=t.policy_delay, actor_lr=t.actor_lr, critic_lr=t.critic_lr)
+
 
 class TD3:
     """Online and target networks, their optimisers, and the update counter."""

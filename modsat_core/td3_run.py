@@ -42,9 +42,7 @@ class TD3Run:
         torch.manual_seed(spec.seed)
         actor = new_actor(spec).to(device)
         critic = make_critic(self.t.network, N_FEATURES, list(self.t.hidden_sizes)).to(device)
-        self.agent = TD3(actor, critic, TD3Config(
-            gamma=self.t.gamma, tau=self.t.tau, policy_noise=self.t.policy_noise, noise_clip=self.t.noise_clip,
-            policy_delay=self.t.policy_delay, actor_lr=self.t.actor_lr, critic_lr=self.t.critic_lr))
+        self.agent = TD3(actor, critic, TD3Config.from_training(self.t))
         capacity = min(self.t.buffer_size, max(self.t.total_env_steps, self.t.batch_size))
         self.buffer = ReplayBuffer(replay_fields(self.env.N), capacity, device=device)
         self.gen = torch.Generator(device=device).manual_seed(spec.seed)
