@@ -77,7 +77,7 @@ def _databases(which: list[str], pg_admin: str, tmp: Path):
         else:
             try:
                 db = _PgDatabase(pg_admin)
-            except Exception as exc:
+            except Exception as exc:  # report and skip
                 yield kind, None, f"skipped: PostgreSQL not reachable at {pg_admin}: {exc}"
                 continue
             yield kind, db.url, db.drop

@@ -116,12 +116,12 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     url = settings.resolved_db_url
     try:
         store = JobStore(url, busy_timeout_s=settings.sqlite_busy_timeout_s)
-    except Exception as exc:
+    except Exception as exc:  # a bad URL: say so and stop
         print(f"modsat serve: {exc}", file=sys.stderr)
         return 2
     try:
         store.create_schema()  # once, before the workers start
-    except Exception as exc:
+    except Exception as exc:  # say what is wrong with the database and stop
         print(f"modsat serve: cannot open the job store {store.url_for_humans}: {exc}", file=sys.stderr)
         return 1
     finally:

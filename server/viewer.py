@@ -76,7 +76,7 @@ def start_viewer(settings: ServerSettings, store):
     try:
         app = ViewerApp(StoreRuns(store), host=settings.host, port=settings.viewer_port,
                         allowed_hosts=settings.host_names())
-    except Exception:
+    except Exception:  # the API works without the viewer; say why it is missing
         log.exception("the 3D viewer could not start; the API runs without it")
         return None
     log.info("modsat: 3D viewer on port %d", app.port)

@@ -137,7 +137,7 @@ class Session:
         try:
             with self.lock:
                 fn()
-        except Exception as exc:
+        except Exception as exc:  # show it in the tab, keep the viewer alive
             log.exception("viewer session error")
             with contextlib.suppress(Exception):
                 self.readout.content = f"**error:** {type(exc).__name__}: {exc}"
@@ -369,7 +369,7 @@ class ViewerApp:
     def _connection(self, client):
         """viser's websocket connection of a tab (viser keeps the handshake request), or None."""
         try:
-            return self.server._websock_server._live_connections.get(client.client_id)
+            return self.server._websock_server._live_connections.get(client.client_id)  # viser 1.1.1
         except AttributeError:
             return None
 
@@ -396,13 +396,13 @@ class ViewerApp:
         if why is not None:
             log.warning("viewer: refused a websocket: %s", why)
             conn = self._connection(client)
-            loop = getattr(self.server._websock_server, "_background_event_loop", None)
+            loop = getattr(self.server._websock_server, "_background_event_loop", None)  # viser 1.1.1
             if conn is not None and loop is not None:  # plain callbacks run on viser's thread pool
                 asyncio.run_coroutine_threadsafe(conn.close(1008, "refused: " + why[:100]), loop)
             return
         try:
             self.sessions[client.client_id] = Session(self, client, self._query(client))
-        except Exception:
+        except Exception:  # a broken run must not take the viewer down
             log.exception("could not open a viewer session")
             client.gui.add_markdown("**modsat viewer**: could not open this view; see the server log.")
 
@@ -413,7 +413,7 @@ class ViewerApp:
             for s in list(self.sessions.values()):
                 try:
                     s.tick(now - last)
-                except Exception:
+                except Exception:  # a closed tab: forget it
                     log.debug("playback tick failed", exc_info=True)
             last = now
 

@@ -119,6 +119,6 @@ def add_recording(files: MutableMapping[str, bytes]) -> bool:
         files[RECORDING_NAME] = recording_bytes(files["design.json"], files["trajectories.json"],
                                                 spec_json=files.get("spec.json"))
         return True
-    except Exception:
+    except Exception:  # see the docstring
         log.exception("could not make the %s recording", RECORDING_NAME)
         return False

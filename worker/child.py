@@ -98,7 +98,7 @@ def child_main(conn, stop_event, runner_name: str, spec_json: str, checkpoint: b
         info = {"stopped": stopped, "env_steps": int(result.env_steps),
                 "summary": _plain(getattr(result, "summary", None))}
         conn.send(("result", info, files))
-    except BaseException as exc:
+    except BaseException as exc:  # every failure is reported, then the child exits
         try:
             conn.send(("error", f"{type(exc).__name__}: {exc}", traceback.format_exc(), isinstance(exc, permanent)))
         except OSError:  # the parent is gone; nobody to tell

@@ -124,7 +124,7 @@ class Worker:
         try:
             self.store.touch_worker(self.id, job_id=claim.job_id, ttl_s=ttl)
             return Attempt(self.store, claim, self.s, self.id, self.shutdown, self.hurry).run()
-        except Exception as exc:
+        except Exception as exc:  # a worker bug fails the attempt, not the worker
             log.exception("job %s attempt %s: worker error", claim.job_id, claim.attempt)
             try:
                 self.store.fail_attempt(claim, error=f"worker error: {type(exc).__name__}: {exc}", detail=None,

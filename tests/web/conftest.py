@@ -71,7 +71,7 @@ class Serve(HttpProc):
         self.base = f"http://127.0.0.1:{self.port}"
         self.data_dir = data_dir
         self.log_path = log_path
-        self._log = open(log_path, "wb")
+        self._log = open(log_path, "wb")  # closed in stop()
         cmd = [MODSAT, "serve", "--workers", str(workers), "--data-dir", str(data_dir), "--port", str(self.port)]
         cmd += ["--viewer-port", "0"] if viewer else ["--no-viewer"]
         env = {**os.environ, "MODSAT_POLL_S": "0.2", "MODSAT_SSE_POLL_S": "0.2", "MODSAT_HEARTBEAT_S": "2",
@@ -146,7 +146,7 @@ def close_webgl_notice(frame) -> None:
             for i in range(buttons.count()):
                 try:
                     buttons.nth(i).click(timeout=2000)
-                except Exception:
+                except Exception:  # it may close by itself meanwhile
                     pass
             return
         time.sleep(0.2)

@@ -70,7 +70,7 @@ class WorkerProc:
 
     def __init__(self, db_url: str, runner: str, log_path: Path, env: dict[str, str] | None = None):
         self.log_path = log_path
-        self._log = open(log_path, "wb")
+        self._log = open(log_path, "wb")  # closed in stop()
         full_env = {**os.environ, **FAST_ENV, **(env or {})}
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "worker", "--db", db_url, "--runner", runner],
@@ -110,7 +110,7 @@ class WorkerProc:
             for _ in range(tries):
                 self.signal(signal.SIGSTOP)
                 try:  # SQLite: BEGIN IMMEDIATE; PostgreSQL: the job's row, without waiting
-                    with probe._write_engine.begin() as conn:
+                    with probe._write_engine.begin() as conn:  # the store's write path
                         conn.execute(select(jobs.c.id).where(jobs.c.id == job_id).with_for_update(nowait=True))
                     return
                 except OperationalError:
@@ -165,7 +165,7 @@ class PgServer:
         try:
             with self._admin() as conn:
                 conn.execute(f'CREATE DATABASE "{self.dbname}"')
-        except Exception as exc:
+        except Exception as exc:  # any failure means: no PostgreSQL here
             self.reason = f"PostgreSQL not reachable at {self.admin_url} (set MODSAT_TEST_PG_URL): {exc}"
             return
         base = self.admin_url.rsplit("/", 1)[0]
@@ -177,7 +177,7 @@ class PgServer:
         try:
             with self._admin() as conn:
                 conn.execute(f'DROP DATABASE IF EXISTS "{self.dbname}" WITH (FORCE)')
-        except Exception:
+        except Exception:  # best effort
             pass
 
 
