@@ -25,6 +25,7 @@ from .spec import JobSpec
 #: Final-evaluation tolerances reported beside the mission's own.
 REPORT_TOLERANCES_DEG = (0.25, 1.0)
 
+
 def curve_seed(spec: JobSpec) -> int:
     """Seed of the learning-curve slews: distinct from the final evaluation's set."""
     return (spec.evaluation.seed + 7919) % (2**31)

@@ -13,11 +13,9 @@ import torch
 from . import quaternion as quat
 from .evaluate import episode_rngs
 from .mission import EpisodeDraw, draw_episode
+from .reports import REPORT_TOLERANCES_DEG  # the same tolerances as the final evaluation
 from .slew import Design, SlewSim
 from .spec import JobSpec
-
-#: The success tolerances the report always shows, beside the mission's own.
-REPORT_TOLERANCES_DEG = (0.25, 1.0)
 
 #: ``controller_factory(sim) -> controller``; ``controller(sim) -> action (B, K, 3) in [-1, 1]``.
 ControllerFactory = Callable[[SlewSim], Callable[[SlewSim], torch.Tensor]]
