@@ -217,7 +217,13 @@ def test_phone_shows_the_job_before_the_form(jobs, new_page):
     _open(page, serve.base)
     page.tap(f"#job-{ids['cube']}")
     page.wait_for_function(f"document.querySelector('#detail-h').textContent.startsWith('Job #{ids['cube']}')")
-    jobs_box, detail, form = (page.locator(s).bounding_box() for s in ("#jobs", "#detail", "#submit"))
+    # the tap scrolls the job to the top once its details are in: wait for that, then measure
+    # everything at once in page coordinates (measuring box by box raced the scroll)
+    page.wait_for_function("Math.abs(document.querySelector('#detail').getBoundingClientRect().top) < 2")
+    jobs_box, detail, form = page.evaluate("""(sels) => sels.map((s) => {
+        const r = document.querySelector(s).getBoundingClientRect();
+        return { x: r.x, y: r.y + window.scrollY, width: r.width, height: r.height };
+    })""", ["#jobs", "#detail", "#submit"])
     assert jobs_box["y"] + jobs_box["height"] <= detail["y"], "the list, then the job"
     assert detail["y"] + detail["height"] <= form["y"], "the job's details come before the submit form"
     assert detail["width"] <= PHONE["width"] and form["width"] <= PHONE["width"]
