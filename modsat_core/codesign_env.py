@@ -56,12 +56,14 @@ class Compact:
     omega_B: Tensor  # (B, 3) float32
     h_cells: Tensor  # (B, C, 3) float16, wheel momentum / scale
 
+    FIELDS = ("grid", "design_step", "q_BN", "q_TN", "omega_B", "h_cells")
+
     def as_dict(self, prefix: str = "") -> dict[str, Tensor]:
-        return {prefix + k: getattr(self, k) for k in ("grid", "design_step", "q_BN", "q_TN", "omega_B", "h_cells")}
+        return {prefix + k: getattr(self, k) for k in self.FIELDS}
 
     @classmethod
     def from_dict(cls, d: dict[str, Tensor], prefix: str = "") -> Compact:
-        return cls(**{k: d[prefix + k] for k in ("grid", "design_step", "q_BN", "q_TN", "omega_B", "h_cells")})
+        return cls(**{k: d[prefix + k] for k in cls.FIELDS})
 
 
 def observe_compact(c: Compact, N: int, design_steps: int, rate_limit_rad_s: float) -> CellObs:

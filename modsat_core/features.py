@@ -83,6 +83,11 @@ class CellObs:
     def index(self, idx: Tensor) -> CellObs:
         return CellObs(self.x[idx], self.act_mask[idx], self.value_mask[idx], self.design[idx])
 
+    def rows(self, start: int, stop: int) -> CellObs:
+        """Rows ``start:stop`` as views (no copy)."""
+        return CellObs(self.x[start:stop], self.act_mask[start:stop], self.value_mask[start:stop],
+                       self.design[start:stop])
+
 
 @dataclass
 class PhysState:
@@ -145,33 +150,32 @@ def cell_observation(
     com = torch.where((count > 0).unsqueeze(-1), com, torch.zeros_like(com))
     dist = (pos - com.unsqueeze(1)).norm(dim=-1, keepdim=True) * (half / N)
 
-    x = torch.zeros(B, C, N_FEATURES, device=dev)
-    x[..., 0:3] = _one_hot(flat)
-    x[..., 3:6] = pos
-    x[..., 6:7] = dist
-    x[..., 7] = design.to(torch.float32).unsqueeze(-1)
-    x[..., 8] = ((flat == ACTUATOR).sum(dim=1, keepdim=True).to(torch.float32) / C)
-    x[..., 9] = count.unsqueeze(-1).to(torch.float32) / C
     # Only designing rows can be invalid: a satellite flies only if its grid was valid.
     valid = torch.ones(B, dtype=torch.bool, device=dev)
     if bool(design.any()):
         valid[design] = valid_mask_batched(grids[design])
-    x[..., 10] = valid.to(torch.float32).unsqueeze(-1)
+    per_sat = torch.stack((design.to(torch.float32), (flat == ACTUATOR).sum(dim=1).to(torch.float32) / C,
+                           count.to(torch.float32) / C, valid.to(torch.float32)), dim=-1)
+    common = torch.cat((_one_hot(flat), pos, dist, per_sat.unsqueeze(1).expand(B, C, 4)), dim=-1)
 
+    dpart = torch.zeros(B, C, N_DESIGN, device=dev)
     if bool(design.any()):  # the design part of the designing rows only (most rows fly)
         rows = design.nonzero().squeeze(-1)
         nb = _one_hot(neighbour_types(grids[rows])).reshape(len(rows), C, 18)
         prog = (design_step[rows].to(torch.float32) / design_steps).reshape(-1, 1, 1).expand(len(rows), C, 1)
-        x[rows, :, N_COMMON:N_COMMON + N_DESIGN] = torch.cat((nb, prog), dim=-1)
+        dpart[rows] = torch.cat((nb, prog), dim=-1)
 
     fly = ~design
     if bool(fly.any()):
         q_e = error_quaternion(phys.q_TN, phys.q_BN).to(torch.float32)
         glob = control_globals(q_e, phys.omega_B.to(torch.float32), rate_limit_rad_s)
-        occupied = (flat != EMPTY).unsqueeze(-1).to(torch.float32)
+        # zero on empty cells and on designing rows
+        keep = ((flat != EMPTY) & fly.unsqueeze(-1)).unsqueeze(-1).to(torch.float32)
         cpart = torch.cat((glob.unsqueeze(1).expand(B, C, N_CONTROL_GLOBAL), phys.h_cells.to(torch.float32)), dim=-1)
-        cpart = cpart * occupied * fly.reshape(B, 1, 1).to(torch.float32)
-        x[..., N_COMMON + N_DESIGN:] = cpart
+        cpart = cpart * keep
+    else:
+        cpart = torch.zeros(B, C, N_CONTROL, device=dev)
+    x = torch.cat((common, dpart, cpart), dim=-1)
 
     act_mask = torch.where(design.unsqueeze(-1), torch.ones_like(flat, dtype=torch.bool), flat == ACTUATOR)
     value_mask = torch.where(design.unsqueeze(-1), torch.ones_like(flat, dtype=torch.bool), flat != EMPTY)
