@@ -9,12 +9,19 @@ from __future__ import annotations
 
 import io
 import math
+import pickle
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 
 from .spec import UnrunnableSpec
+
+try:
+    from numpy._core import multiarray as np_multiarray  # numpy 2
+except ImportError:  # numpy 1
+    from numpy.core import multiarray as np_multiarray  # type: ignore[no-redef]
 
 ProgressFn = Callable[[dict], None]
 CheckpointFn = Callable[[dict], None]
@@ -35,13 +42,48 @@ def resolve_device(name: str) -> str:
 
 
 def checkpoint_to_bytes(ckpt: dict) -> bytes:
+    """A checkpoint as bytes that ``torch.load(weights_only=True)`` reads: tensors and plain
+    data (numpy arrays and scalars become lists and numbers)."""
     buf = io.BytesIO()
-    torch.save(ckpt, buf)
+    torch.save(_plain(ckpt), buf)
     return buf.getvalue()
 
 
 def checkpoint_from_bytes(data: bytes) -> dict:
-    return torch.load(io.BytesIO(data), map_location="cpu", weights_only=False)
+    """Read a checkpoint with ``torch.load(weights_only=True)``: a checkpoint can be downloaded
+    (``/api/jobs/{id}/artifacts/checkpoint.pt``) and handed back (``modsat train --resume``), so
+    a pickle that would build other objects (and could run code) is refused. Numpy integer
+    arrays, which checkpoints before this rule held (the best design's grid), are allowed."""
+    try:
+        with torch.serialization.safe_globals(_NUMPY_ARRAYS):
+            ckpt = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise ValueError("not a modsat checkpoint: it holds objects other than tensors and plain data, which are "
+                         f"not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}") from None
+    if not isinstance(ckpt, dict):
+        raise ValueError("not a modsat checkpoint")
+    return ckpt
+
+
+#: What an older checkpoint's numpy grid needs from ``weights_only`` loading: the array
+#: constructor (under numpy 2's and numpy 1's module names) and the array and dtype types.
+_NUMPY_ARRAYS: list = [np.ndarray, np.dtype, *(type(np.dtype(t)) for t in (np.int64, np.int8, np.float64)),
+                       (np_multiarray._reconstruct, "numpy._core.multiarray._reconstruct"),
+                       (np_multiarray._reconstruct, "numpy.core.multiarray._reconstruct")]
+
+
+def _plain(x):
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_plain(v) for v in x]
+    if isinstance(x, tuple):
+        return tuple(_plain(v) for v in x)
+    return x
 
 
 def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:

@@ -222,6 +222,8 @@ class TD3Run:
         self.env_steps, self.update_credit = d["env_steps"], d["update_credit"]
         self.next_eval, self.next_ckpt = d["next_eval"], d["next_ckpt"]
         self.curve, self.best = list(d["curve"]), d["best"]
+        if self.best is not None:  # the grid is a list in a checkpoint's bytes (weights_only loading)
+            self.best["grid"] = np.asarray(self.best["grid"], dtype=np.int64)
         self.agent.load_state_dict(to_device(d["agent"], self.device))
         self.env.load_state_dict(to_device(d["env"], self.device))
         if d["buffer"] is not None:

@@ -111,10 +111,11 @@ def test_stop_and_resume_continues_from_the_checkpoint(network, explored, n_step
 
 def test_ga_run_stops_and_resumes():
     spec = tiny_spec(algorithm="ga", training__total_env_steps=320)
-    ckpts = []
-    first = train(spec, on_checkpoint=ckpts.append, should_stop=lambda: len(ckpts) >= 3)
+    ckpts: list[bytes] = []  # as the worker keeps them: bytes, read back with weights_only
+    first = train(spec, on_checkpoint=lambda ck: ckpts.append(checkpoint_to_bytes(ck)),
+                  should_stop=lambda: len(ckpts) >= 3)
     assert first.stopped
-    second = train(spec, checkpoint=ckpts[-1])
+    second = train(spec, checkpoint=checkpoint_from_bytes(ckpts[-1]))
     assert not second.stopped and second.env_steps == 320
     assert second.curve == train(spec).curve
 
@@ -133,7 +134,7 @@ def test_a_policy_file_from_before_the_network_choice_is_refused_with_a_reason()
     import io
 
     files = train(tiny_spec(training__total_env_steps=5)).artifacts()
-    d = torch.load(io.BytesIO(files["policy.pt"]), weights_only=False)
+    d = torch.load(io.BytesIO(files["policy.pt"]), weights_only=True)
     assert d["version"] == 2 and d["network"] == "per-module"
     old = {k: v for k, v in d.items() if k != "network"} | {"version": 1, "n_features": 47}
     buf = io.BytesIO()

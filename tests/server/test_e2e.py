@@ -103,7 +103,7 @@ def test_quick_preset_over_http(start_server, sqlite_url, spawn_worker):
     assert len(policy.content) == files["policy.pt"]["size"]
     assert hashlib.sha256(policy.content).hexdigest() == files["policy.pt"]["sha256"]
     assert 'filename="modsat-job-' in policy.headers["content-disposition"]
-    raw = torch.load(io.BytesIO(policy.content), weights_only=False)
+    raw = torch.load(io.BytesIO(policy.content), weights_only=True)
     assert raw["format"] == "modsat-policy"
     actor, grid, spec = load_policy(policy.content)
     assert spec.name == "e2e" and grid is not None and grid.shape == (3, 3, 3)
