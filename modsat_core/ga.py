@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from .artefacts import CurvePoint, ProgressRecord
 from .checkpoint import CHECKPOINT_VERSION, RunResult
 from .grid import is_valid
 from .policy_file import actor_from_state
@@ -132,10 +133,11 @@ class GARun:
             offset = self.used
 
             def progress(p: dict, _o=offset, _g=self.generation) -> None:
-                on_progress({**p, "env_steps": _o + p["env_steps"], "total_env_steps": total,
-                             "phase": f"ga generation {_g}, design {len(self.records) + 1}",
-                             "eval": None if p.get("eval") is None
-                             else {**p["eval"], "env_steps": _o + p["eval"]["env_steps"]}})
+                on_progress(ProgressRecord.model_validate({
+                    **p, "env_steps": _o + p["env_steps"], "total_env_steps": total,
+                    "phase": f"ga generation {_g}, design {len(self.records) + 1}",
+                    "eval": None if p.get("eval") is None else {**p["eval"], "env_steps": _o + p["eval"]["env_steps"]},
+                }).to_dict())
 
             def checkpoint(inner: dict) -> None:
                 self.inner_ckpt = inner
@@ -155,9 +157,10 @@ class GARun:
                 self.best_actor = {"fitness": fitness, "grid": grid.tolist(), "actor": run.best["actor"],
                                    "record": len(self.records) - 1}
             self.pending.pop(0)
-            self.curve.append({"env_steps": self.used, "mean_return": self.best_actor["fitness"],
-                               "success_rate": self.records[self.best_actor["record"]]["success_rate"],
-                               "design_return": fitness, "generation": self.generation})
+            self.curve.append(CurvePoint(
+                env_steps=self.used, mean_return=self.best_actor["fitness"],
+                success_rate=self.records[self.best_actor["record"]]["success_rate"], design_return=fitness,
+                generation=self.generation).to_dict())
             on_checkpoint(self.state_dict())
         return False
 
@@ -177,8 +180,8 @@ class GARun:
             if total - self.used < self.spec.training.num_envs:  # not one more batch of steps
                 break
             self._next_generation()
-        on_progress({"env_steps": self.used, "total_env_steps": total, "updates": 0, "phase": "evaluating",
-                     "eval": None})
+        on_progress(ProgressRecord(env_steps=self.used, total_env_steps=total, updates=0, phase="evaluating",
+                                   eval=None).to_dict())
         assert self.best_actor is not None  # at least one design was evaluated
         actor = actor_from_state(self.spec, self.best_actor["actor"])
         grid = np.asarray(self.best_actor["grid"], dtype=np.int64)

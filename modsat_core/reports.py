@@ -6,12 +6,12 @@ a finished run writes (docs/learning.md, "Outputs of a run").
 from __future__ import annotations
 
 import io
-import json
 from typing import Any
 
 import numpy as np
 import torch
 
+from .artefacts import CurveFile, CurvePoint, DesignReport, EvaluationReport, RunSummary, Trajectories
 from .codesign_env import effective_invalid_penalty
 from .evaluate import monte_carlo
 from .grid import ACTUATOR, EMPTY, is_valid
@@ -56,20 +56,18 @@ def curve_point(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, env_ste
         s = mc.summary(REPORT_TOLERANCES_DEG)
         point.update({k: s[k] for k in ("mean_return", "success_rate", *tol_keys, "median_final_error_deg",
                                         "median_slew_time_ratio")})
-    return point
+    return CurvePoint.model_validate(point).to_dict()
 
 
-def design_report(grid: np.ndarray, spec: JobSpec) -> dict:
+def design_report(grid: np.ndarray, spec: JobSpec) -> DesignReport:
+    """``design.json``: the grid, its module counts and (with modules) its mass properties."""
     grid = np.asarray(grid)
-    out = {"grid": grid.tolist(), "grid_size": int(grid.shape[0]), "valid": bool(is_valid(grid)),
-           "modules": int((grid != EMPTY).sum()), "actuators": int((grid == ACTUATOR).sum()),
-           "types": {"0": "empty", "1": "structure", "2": "actuator"}}
-    if out["modules"]:
-        mp = mass_properties(grid, spec.modules.module_mass_kg, spec.modules.module_size_m)
-        out.update({"mass_kg": float(mp.mass_kg), "com_grid_m": np.asarray(mp.com_grid_m).tolist(),
-                    "inertia_kgm2": np.asarray(mp.inertia_B_kgm2).tolist(),
-                    "principal_inertia_kgm2": np.linalg.eigvalsh(mp.inertia_B_kgm2).tolist()})
-    return out
+    if not (grid != EMPTY).any():
+        return DesignReport.of(grid)
+    mp = mass_properties(grid, spec.modules.module_mass_kg, spec.modules.module_size_m)
+    return DesignReport.of(grid, mass_kg=float(mp.mass_kg), com_grid_m=np.asarray(mp.com_grid_m).tolist(),
+                           inertia_kgm2=np.asarray(mp.inertia_B_kgm2).tolist(),
+                           principal_inertia_kgm2=np.linalg.eigvalsh(mp.inertia_B_kgm2).tolist())
 
 
 def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: int | None = None) -> dict:
@@ -129,21 +127,23 @@ def run_files(spec: JobSpec, curve: list[dict], actor: torch.nn.Module, grid: np
               ) -> tuple[dict[str, bytes], dict]:
     """All output files of a finished run, and a short summary of its evaluation."""
 
-    ev = final_evaluation(actor, grid, spec)
-    traj = ev.pop("trajectories")
+    raw = final_evaluation(actor, grid, spec)
+    traj = Trajectories.model_validate(raw.pop("trajectories"))
+    ev = EvaluationReport.model_validate(raw)
+    design = design_report(grid, spec)
     title = f"{spec.name or spec.algorithm}: {spec.design.grid_size}^3, seed {spec.seed}"
     files = {
         "spec.json": spec.model_dump_json(indent=2).encode(),
-        "curve.json": json.dumps({"algorithm": spec.algorithm, "points": curve, **(extra or {})}, indent=1).encode(),
+        "curve.json": CurveFile.model_validate({"algorithm": spec.algorithm, "points": curve, **(extra or {})}
+                                               ).to_json(indent=1),
         "curve.png": curve_png(curve, title),
-        "design.json": json.dumps(design_report(grid, spec), indent=1).encode(),
-        "evaluation.json": json.dumps(ev, indent=1).encode(),
-        "trajectories.json": json.dumps(traj).encode(),
+        "design.json": design.to_json(indent=1),
+        "evaluation.json": ev.to_json(indent=1),
+        "trajectories.json": traj.to_json(),
         "policy.pt": policy_bytes(actor, grid, spec),
     }
-    if ev["design_valid"]:
+    if ev.design_valid:
         files["policy_export.pt"] = export_torchscript(actor, grid, spec)
-    summary = {"policy": ev["policy"]["summary"],
-               "pd_baseline": ev["pd_baseline"]["summary"] if ev["pd_baseline"] else None,
-               "design": {k: v for k, v in design_report(grid, spec).items() if k != "grid"}}
-    return files, summary
+    summary = RunSummary(policy=ev.policy.summary, pd_baseline=ev.pd_baseline.summary if ev.pd_baseline else None,
+                         design=design.figures())
+    return files, summary.to_dict()

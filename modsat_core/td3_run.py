@@ -10,6 +10,7 @@ import copy
 import numpy as np
 import torch
 
+from .artefacts import ProgressRecord
 from .checkpoint import (
     CHECKPOINT_BUFFER_LIMIT_BYTES,
     CheckpointFn,
@@ -198,7 +199,7 @@ class TD3Run:
         for k in ("critic_loss", "actor_loss", "q"):
             if k in self.last_info:
                 out[k] = self.last_info[k]
-        return out
+        return ProgressRecord.model_validate(out).to_dict()
 
     def best_actor(self) -> tuple[torch.nn.Module, np.ndarray]:
         """The snapshot the final evaluation uses (best success rate on the curve, then best

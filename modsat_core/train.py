@@ -13,6 +13,7 @@ that would), so it may end up to ``num_envs - 1`` steps short of it.
 
 from __future__ import annotations
 
+from .artefacts import ProgressRecord
 from .checkpoint import (
     CHECKPOINT_VERSION,
     CheckpointFn,
@@ -66,8 +67,8 @@ def train(
     stopped = run.run(on_progress, wrap, should_stop)
     if stopped:
         return RunResult(stopped=True, env_steps=run.env_steps, curve=run.curve)
-    on_progress({"env_steps": run.env_steps, "total_env_steps": spec.training.total_env_steps,
-                 "updates": run.agent.updates, "phase": "evaluating", "eval": None})
+    on_progress(ProgressRecord(env_steps=run.env_steps, total_env_steps=spec.training.total_env_steps,
+                               updates=run.agent.updates, phase="evaluating", eval=None).to_dict())
     actor, grid = run.best_actor()
     assert run.best is not None  # best_actor() needs it too
     files, summary = run_files(spec, run.curve, actor, grid, {"best_env_steps": run.best["env_steps"]})

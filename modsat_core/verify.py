@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from . import dynamics as dyn
+from .artefacts import DesignReport
 from .grid import ACTUATOR, is_valid
 from .mission import EpisodeDraw
 from .morphology import mass_properties
@@ -77,12 +78,10 @@ class Run:
 
 def load_run(run_dir: str) -> Run:
     """Read ``spec.json``, ``design.json`` and (if present) ``policy_export.pt``."""
-    import json
-
     with open(os.path.join(run_dir, "spec.json"), "rb") as fh:
         spec = parse_spec(fh.read())
     with open(os.path.join(run_dir, "design.json"), "rb") as fh:
-        grid = np.asarray(json.loads(fh.read())["grid"], dtype=np.int64)
+        grid = DesignReport.parse(fh.read(), f"{run_dir}/design.json").array
     if not is_valid(grid):
         raise ValueError(f"the design in {run_dir}/design.json is not a valid satellite: nothing to fly")
     path = os.path.join(run_dir, "policy_export.pt")

@@ -314,23 +314,23 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _print_evaluation(summary: dict, stream) -> None:
-    d = summary.get("design", {})
-    print(f"design: {d.get('modules')} modules, {d.get('actuators')} actuators, valid={d.get('valid')}", file=stream)
-    rows = [("policy", summary.get("policy"))]
-    if summary.get("pd_baseline"):
-        rows.append(("PD baseline", summary["pd_baseline"]))
+    from modsat_core.artefacts import RunSummary
+
+    s = RunSummary.parse(summary)
+    d = s.design
+    print(f"design: {d and d.modules} modules, {d and d.actuators} actuators, valid={d and d.valid}", file=stream)
     print(f"{'':<12} {'episodes':>8} {'success':>8} {'@0.25deg':>9} {'@1deg':>7} {'return':>16} "
           f"{'slew/bound':>10}", file=stream)
-    for name, s in rows:
-        if s is None:
+    for name, ev in (("policy", s.policy), ("PD baseline", s.pd_baseline)):
+        if ev is None:
             continue
 
-        def pct(key, s=s):
-            return f"{100 * s[key]:.0f}%" if s.get(key) is not None else "-"
+        def pct(value: float | None) -> str:
+            return "-" if value is None else f"{100 * value:.0f}%"
 
-        ratio = s.get("median_slew_time_ratio")
-        print(f"{name:<12} {s['episodes']:>8} {pct('success_rate'):>8} {pct('success_rate_at_0.25_deg'):>9} "
-              f"{pct('success_rate_at_1_deg'):>7} {s['mean_return']:>8.1f} +/- {s.get('std_return', 0):<5.1f} "
+        ratio, ret = ev.median_slew_time_ratio, ev.mean_return
+        print(f"{name:<12} {ev.episodes:>8} {pct(ev.success_rate):>8} {pct(ev.success_at(0.25)):>9} "
+              f"{pct(ev.success_at(1.0)):>7} {'-' if ret is None else f'{ret:.1f}':>8} +/- {ev.std_return or 0:<5.1f} "
               f"{'-' if ratio is None else f'{ratio:.2f}':>10}", file=stream)
 
 
@@ -356,8 +356,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     else:
         from modsat_core.reports import design_report
 
-        d = design_report(grid, spec)
-        summary = {"design": d, "policy": ev["policy"]["summary"],
+        d = design_report(grid, spec).figures()
+        summary = {"design": d.to_dict(), "policy": ev["policy"]["summary"],
                    "pd_baseline": ev["pd_baseline"]["summary"] if ev["pd_baseline"] else None}
         _print_evaluation(summary, sys.stdout)
     return 0

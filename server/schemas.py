@@ -8,6 +8,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from modsat_core.artefacts import CurvePoint, ProgressRecord, RunSummary
 from modsat_core.presets import PRESETS
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
@@ -63,20 +64,17 @@ class JobSummary(BaseModel):
     worker_id: str | None
     lease_expires_at: datetime | None
     progress: Progress
-    last_eval: dict[str, Any] | None = Field(description="The latest learning-curve point.")
+    last_eval: CurvePoint | None = Field(description="The latest learning-curve point.")
     error: str | None
     url: str
 
 
-class MetricsPoint(BaseModel):
-    """One progress report: the training's dict plus the row's bookkeeping."""
-
-    model_config = ConfigDict(extra="allow")
+class MetricsPoint(ProgressRecord):
+    """One progress report: the training's record plus the row's bookkeeping."""
 
     seq: int = Field(description="Per-job sequence number, 1, 2, 3, ...")
     attempt: int
     time: datetime
-    env_steps: int
 
 
 class AttemptInfo(BaseModel):
@@ -94,7 +92,7 @@ class JobDetail(JobSummary):
 
     spec: dict[str, Any]
     latest_metrics: MetricsPoint | None
-    evaluation: dict[str, Any] | None = Field(description="Summary of the final Monte-Carlo evaluation.")
+    evaluation: RunSummary | None = Field(description="Summary of the final Monte-Carlo evaluation.")
     error_detail: str | None = Field(description="Traceback of the last failed attempt.")
     attempts: list[AttemptInfo]
     links: dict[str, str]

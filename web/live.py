@@ -254,15 +254,15 @@ class Session:
         lines = ["Grey cubes: structure modules; orange cubes: reaction-wheel actuators. "
                  "Thick axes: body frame (x red, y green, z blue); faint copy: target attitude.", ""]
         for r in self.runs:
-            d = r.design
+            mass = r.design.mass_kg
             lines.append(f"**{r.short_algorithm}: {r.title}**: {r.modules} modules, {r.actuators} actuators"
-                         + (f", {d['mass_kg']:.1f} kg" if isinstance(d.get("mass_kg"), (int, float)) else ""))
-            ev = r.evaluation or {}
-            for key, name in (("policy", "policy"), ("pd_baseline", "PD baseline")):
-                s = (ev.get(key) or {}).get("summary")
-                if s:
-                    lines.append(f"- {name}: success {100 * s.get('success_rate', 0):.0f} % of "
-                                 f"{s.get('episodes')} slews, mean return {s.get('mean_return', 0):.1f}")
+                         + (f", {mass:.1f} kg" if mass is not None else ""))
+            ev = r.evaluation
+            for c, name in ((ev and ev.policy, "policy"), (ev and ev.pd_baseline, "PD baseline")):
+                if c:
+                    s = c.summary
+                    lines.append(f"- {name}: success {100 * s.success_rate:.0f} % of "
+                                 f"{s.episodes} slews, mean return {s.mean_return or 0:.1f}")
             lines.append("")
         return "\n".join(lines)
 

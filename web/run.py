@@ -5,7 +5,9 @@ gives, per controller (``policy`` and ``pd_baseline``), the time histories of th
 evaluation slews (modsat_core.evaluate.monte_carlo): ``t_s`` (T,), ``q_BN`` (T, 4) scalar
 first, ``omega_B`` (T, 3) rad/s, ``h_B`` (T, 3) wheel momentum in N m s, ``error_deg`` (T,),
 ``q_TN`` (4,) and the episode's ``metrics``. Both controllers fly the same seeded slews, and
-so do two runs with the same evaluation seed: episode i is comparable across them.
+so do two runs with the same evaluation seed: episode i is comparable across them. The files
+are read through their models in modsat_core.artefacts (a file that does not fit raises
+``ArtefactError``, a ``ValueError``, naming it).
 """
 
 from __future__ import annotations
@@ -14,20 +16,14 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from modsat_core.artefacts import DesignReport, EpisodeMetrics, EvaluationReport, Trajectories, Trajectory
 from modsat_core.grid import ACTUATOR, EMPTY
 
 #: Controllers in ``trajectories.json`` and how the viewer names them.
 CONTROLLERS = {"policy": "policy", "pd_baseline": "PD baseline"}
-
-
-def _as_obj(data: bytes | str | dict | list | None) -> Any:
-    if data is None or isinstance(data, (dict, list)):
-        return data
-    return json.loads(data)
 
 
 @dataclass(frozen=True)
@@ -40,22 +36,21 @@ class Episode:
     h_B: np.ndarray  # (T, 3) N m s, total wheel momentum in the body frame
     error_deg: np.ndarray  # (T,) deg
     q_TN: np.ndarray  # (4,)
-    metrics: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)  # EpisodeMetrics as plain data
 
     @classmethod
-    def from_dict(cls, d: dict) -> Episode:
-        t = np.asarray(d["t_s"], dtype=np.float64).reshape(-1)
+    def from_record(cls, r: Trajectory) -> Episode:
+        """From a slew of ``trajectories.json`` (a history it lacks reads as zeros)."""
+        t = np.asarray(r.t_s, dtype=np.float64).reshape(-1)
         n = len(t)
 
-        def arr(key: str, width: int) -> np.ndarray:
-            v = d.get(key)
+        def arr(v: list | None, width: int) -> np.ndarray:
             return np.zeros((n, width)) if v is None else np.asarray(v, dtype=np.float64).reshape(n, width)
 
-        err = d.get("error_deg")
-        return cls(t_s=t, q_BN=arr("q_BN", 4), omega_B=arr("omega_B", 3), h_B=arr("h_B", 3),
-                   error_deg=np.zeros(n) if err is None else np.asarray(err, dtype=np.float64).reshape(n),
-                   q_TN=np.asarray(d.get("q_TN", (1.0, 0.0, 0.0, 0.0)), dtype=np.float64).reshape(4),
-                   metrics=dict(d.get("metrics") or {}))
+        return cls(t_s=t, q_BN=arr(r.q_BN, 4), omega_B=arr(r.omega_B, 3), h_B=arr(r.h_B, 3),
+                   error_deg=np.zeros(n) if r.error_deg is None else np.asarray(r.error_deg, dtype=np.float64),
+                   q_TN=np.asarray(r.q_TN or (1.0, 0.0, 0.0, 0.0), dtype=np.float64),
+                   metrics=(r.metrics or EpisodeMetrics()).to_dict())
 
     @property
     def duration_s(self) -> float:
@@ -108,22 +103,21 @@ class RunData:
     title: str
     grid: np.ndarray  # (N, N, N) int: 0 empty, 1 structure, 2 actuator
     episodes: dict[str, list[Episode]]  # controller -> recorded slews
-    design: dict = field(default_factory=dict)
-    evaluation: dict | None = None
+    design: DesignReport
+    evaluation: EvaluationReport | None = None
     spec: dict | None = None
 
     @classmethod
     def from_json(cls, design, trajectories, *, evaluation=None, spec=None, title: str | None = None) -> RunData:
-        """From the artefacts' bytes (or already decoded JSON)."""
-        design, trajectories = _as_obj(design), _as_obj(trajectories) or {}
-        evaluation, spec = _as_obj(evaluation), _as_obj(spec)
-        grid = np.asarray(design.get("grid") or [[[0]]], dtype=np.int64)
-        if grid.ndim != 3:
-            raise ValueError(f"design.json: grid must be 3-dimensional, got shape {grid.shape}")
-        episodes = {k: [Episode.from_dict(e) for e in trajectories.get(k) or []] for k in CONTROLLERS}
+        """From the artefacts' bytes (or already decoded JSON); ``ArtefactError`` if one is not in its format."""
+        d = DesignReport.parse(design)
+        traj = Trajectories.parse(trajectories)
+        ev = None if evaluation is None else EvaluationReport.parse(evaluation)
+        spec = json.loads(spec) if isinstance(spec, (bytes, str)) else spec
+        episodes = {k: [Episode.from_record(e) for e in getattr(traj, k)] for k in CONTROLLERS}
         if title is None:
             title = (spec or {}).get("name") or (spec or {}).get("algorithm") or "run"
-        return cls(title=title, grid=grid, episodes=episodes, design=design, evaluation=evaluation, spec=spec)
+        return cls(title=title, grid=d.array, episodes=episodes, design=d, evaluation=ev, spec=spec)
 
     @classmethod
     def from_dir(cls, path: str | Path, title: str | None = None) -> RunData:

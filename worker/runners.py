@@ -26,6 +26,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from modsat_core.artefacts import CurvePoint, ProgressRecord
+
 RUNNERS = {
     "train": "worker.train_runner:train",
     "noop": "worker.runners:noop",
@@ -83,7 +85,8 @@ def checkpoint_from_bytes(data: bytes) -> dict:
 
 def noop(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:
     total = spec.training.total_env_steps
-    on_progress({"env_steps": total, "total_env_steps": total, "updates": 0, "phase": "training", "eval": None})
+    on_progress(ProgressRecord(env_steps=total, total_env_steps=total, updates=0, phase="training",
+                               eval=None).to_dict())
     return SimpleResult(False, total, {"result.json": b'{"runner": "noop"}'}, {"runner": "noop"})
 
 
@@ -107,10 +110,10 @@ def simulated(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None)
         env_steps = min(t.total_env_steps, env_steps + tick)
         point = None
         if env_steps >= next_eval or env_steps >= t.total_env_steps:
-            point = {"env_steps": env_steps, "mean_return": env_steps / t.total_env_steps, "success_rate": 0.0}
+            point = CurvePoint(env_steps=env_steps, mean_return=env_steps / t.total_env_steps, success_rate=0.0)
             next_eval = (env_steps // t.eval_every_steps + 1) * t.eval_every_steps
-        on_progress({"env_steps": env_steps, "total_env_steps": t.total_env_steps, "updates": env_steps // 2,
-                     "phase": "training", "eval": point})
+        on_progress(ProgressRecord(env_steps=env_steps, total_env_steps=t.total_env_steps, updates=env_steps // 2,
+                                   phase="training", eval=point).to_dict())
         if env_steps >= next_ckpt and env_steps < t.total_env_steps:
             on_checkpoint({"env_steps": env_steps, "resumed_from": resumed_from})
             next_ckpt = (env_steps // t.checkpoint_every_steps + 1) * t.checkpoint_every_steps

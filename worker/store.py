@@ -18,6 +18,7 @@ Times are epoch seconds from the database's clock (``db_now``).
 from __future__ import annotations
 
 import hashlib
+import json
 import mimetypes
 import time
 from collections.abc import Iterator, Mapping
@@ -39,6 +40,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import IntegrityError, ProgrammingError
+
+from modsat_core.artefacts import ProgressRecord
 
 from .db import (
     TERMINAL_STATUSES,
@@ -406,22 +409,26 @@ class JobStore:
         return Beat(alive=False) if row is None else Beat(alive=True, cancel_requested=bool(row[0]))
 
     def publish_progress(self, c: Claim, data: Mapping[str, Any]) -> int | None:
-        """Append one metrics row (fenced); returns its sequence number, or None if fenced off."""
-        env_steps = int(data.get("env_steps") or 0)
+        """Append one metrics row (fenced); returns its sequence number, or None if fenced off.
+
+        ``data`` is a progress record (modsat_core.artefacts.ProgressRecord); one that does not
+        fit raises :class:`~modsat_core.artefacts.ArtefactError`."""
+        rec = ProgressRecord.parse(json.loads(to_json(data)))  # numpy numbers, NaN and inf made JSON first
+        env_steps = rec.env_steps
         values: dict[str, Any] = {"last_seq": jobs.c.last_seq + 1, "env_steps": env_steps, "updated_at": db_now()}
-        if data.get("total_env_steps"):
-            values["total_env_steps"] = int(data["total_env_steps"])
-        if data.get("phase"):
-            values["phase"] = str(data["phase"])[:32]
-        if data.get("eval"):
-            values["last_eval"] = to_json(data["eval"])
+        if rec.total_env_steps:
+            values["total_env_steps"] = rec.total_env_steps
+        if rec.phase:
+            values["phase"] = rec.phase[:32]
+        if rec.eval:
+            values["last_eval"] = to_json(rec.eval.to_dict())
         with self._write() as conn:
             seq = conn.execute(update(jobs).where(_fence(c)).values(**values).returning(jobs.c.last_seq)).scalar()
             if seq is None:
                 return None
             conn.execute(insert(metrics).values(
                 job_id=c.job_id, seq=seq, attempt=c.attempt, created_at=db_now(), env_steps=env_steps,
-                data=to_json(data),
+                data=to_json(rec.to_dict()),
             ))
         return int(seq)
 

@@ -23,7 +23,7 @@ ALLOWED = {
     "server": {"modsat_core", "web", "worker"},
 }
 #: The modsat_core modules web may use: torch-free data types.
-WEB_MAY_USE = {"modsat_core.grid"}
+WEB_MAY_USE = {"modsat_core.grid", "modsat_core.artefacts"}
 
 
 def module_imports(root: Path) -> dict[str, set[str]]:

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from modsat_core.artefacts import ArtefactError, DesignReport, Trajectories
 from web.recording import RECORDING_NAME, add_recording, recording_bytes, recording_html
 from web.run import Episode, RunData
 from web.scene import ACTUATOR_SRGB, Voxels, side_by_side_positions, srgb_to_linear
@@ -26,10 +27,9 @@ def _episode(T: int = 13, dt: float = 1 / 12) -> dict:
 
 
 def _files() -> dict[str, bytes]:
-    design = {"grid": GRID, "grid_size": 3, "modules": 3, "actuators": 1}
-    traj = {"policy": [_episode(), _episode(5)], "pd_baseline": [_episode(), _episode()]}
+    traj = Trajectories.model_validate({"policy": [_episode(), _episode(5)], "pd_baseline": [_episode(), _episode()]})
     spec = {"name": "unit", "algorithm": "td3-codesign"}
-    return {"design.json": json.dumps(design).encode(), "trajectories.json": json.dumps(traj).encode(),
+    return {"design.json": DesignReport.of(GRID).to_json(), "trajectories.json": traj.to_json(),
             "spec.json": json.dumps(spec).encode()}
 
 
@@ -72,6 +72,18 @@ def test_run_data_reads_the_artefacts():
     assert ep.index_at(0.0) == 0 and ep.index_at(0.5) == 6 and ep.index_at(99.0) == 12 and ep.index_at(-1) == 0
     assert ep.rate_rad_s[0] == pytest.approx(0.1) and ep.wheel_momentum_Nms[0] == pytest.approx(0.002)
     assert "90 deg slew, success" in ep.describe()
+
+
+def test_run_data_refuses_files_not_in_their_format_and_names_them():
+    files = _files()
+    with pytest.raises(ArtefactError, match=r"design.json is not JSON"):
+        RunData.from_json(b"not json", files["trajectories.json"])
+    lopsided = json.dumps({"policy": [{**_episode(), "q_BN": [[1.0, 0.0, 0.0, 0.0]]}]})
+    with pytest.raises(ArtefactError, match=r"trajectories.json .*policy\.0.*q_BN must be \(13, 4\)"):
+        RunData.from_json(files["design.json"], lopsided)
+    with pytest.raises(ArtefactError, match=r"design.json .*grid"):
+        RunData.from_json(json.dumps({"grid": [[1, 2]], "grid_size": 1, "valid": True, "modules": 1,
+                                      "actuators": 1}), files["trajectories.json"])
 
 
 def test_recording_is_a_viser_file_of_the_slews():

@@ -5,17 +5,25 @@ reference line on the learning curves, the total time and the attempts of a job 
 twice, and a thumbnail of each finished job's satellite in the list.
 
 No training runs here: one `modsat serve` without workers, and the jobs' histories written
-through the job store (worker/store.py, as a worker writes them), with files in the formats
-of modsat_core/train.py's ``run_files`` (design.json, evaluation.json, curve.json). The real
-pipeline's files are shown in test_flow.py."""
+through the job store (worker/store.py, as a worker writes them), with files made through
+their models in modsat_core/artefacts.py (design.json, evaluation.json, curve.json), as
+modsat_core/reports.py's ``run_files`` makes them. The real pipeline's files are shown in
+test_flow.py."""
 
 from __future__ import annotations
 
-import json
 import sqlite3
 
 import pytest
 
+from modsat_core.artefacts import (
+    CurveFile,
+    CurvePoint,
+    DesignReport,
+    EvaluationReport,
+    ProgressRecord,
+    RunSummary,
+)
 from worker.settings import default_db_url
 from worker.store import JobStore
 
@@ -43,19 +51,17 @@ POLICY_CUBE = {**PD_CUBE, "success_rate": 0.75, "success_rate_at_0.25_deg": 0.5,
                "mean_return": -60.25}
 
 
-def _design(grid) -> dict:
-    """design.json as modsat_core.train.design_report writes it (mass figures made up)."""
+def _design(grid) -> DesignReport:
+    """design.json as modsat_core.reports.design_report writes it (mass figures made up)."""
     flat = [v for plane in grid for row in plane for v in row]
-    return {"grid": grid, "grid_size": len(grid), "valid": True, "modules": sum(v != 0 for v in flat),
-            "actuators": sum(v == 2 for v in flat), "types": {"0": "empty", "1": "structure", "2": "actuator"},
-            "mass_kg": 2.0 * sum(v != 0 for v in flat), "principal_inertia_kgm2": [0.01, 0.01, 0.01]}
+    return DesignReport.of(grid, mass_kg=2.0 * sum(v != 0 for v in flat), principal_inertia_kgm2=[0.01, 0.01, 0.01])
 
 
-def _curve(n: int = 5) -> list[dict]:
-    """Learning-curve points as train.curve_point makes them: success at the mission tolerance only."""
-    return [{"env_steps": TOTAL * (i + 1) // n, "updates": 10 * i, "valid": True, "modules": 27, "actuators": 1,
-             "mean_return": -120.0 + 15.0 * i, "success_rate": 0.1 * i, "median_final_error_deg": 2.0 / (i + 1),
-             "median_slew_time_ratio": 2.0} for i in range(n)]
+def _curve(n: int = 5) -> list[CurvePoint]:
+    """Learning-curve points as reports.curve_point makes them, less the report tolerances' success."""
+    return [CurvePoint(env_steps=TOTAL * (i + 1) // n, updates=10 * i, valid=True, modules=27, actuators=1,
+                       mean_return=-120.0 + 15.0 * i, success_rate=0.1 * i, median_final_error_deg=2.0 / (i + 1),
+                       median_slew_time_ratio=2.0) for i in range(n)]
 
 
 class Jobs:
@@ -86,16 +92,19 @@ class Jobs:
     def complete(self, c, grid, *, pd=PD_CUBE, policy=POLICY_CUBE, elapsed_s: float = 62.0) -> None:
         curve = _curve()
         for p in curve:
-            assert self.store.publish_progress(c, {"env_steps": p["env_steps"], "total_env_steps": TOTAL,
-                                                   "phase": "training", "eval": p, "elapsed_s": elapsed_s / 2})
-        self.store.publish_progress(c, {"env_steps": TOTAL, "phase": "done", "elapsed_s": elapsed_s})
+            assert self.store.publish_progress(c, ProgressRecord(
+                env_steps=p.env_steps, total_env_steps=TOTAL, phase="training", eval=p, elapsed_s=elapsed_s / 2,
+            ).to_dict())
+        self.store.publish_progress(c, ProgressRecord(env_steps=TOTAL, phase="done", elapsed_s=elapsed_s).to_dict())
         design = _design(grid)
-        evaluation = {"episodes": 8, "seed": 0, "design_valid": True, "policy": {"summary": policy, "episodes": []},
-                      "pd_baseline": {"summary": pd, "episodes": []}}
-        files = {"design.json": json.dumps(design).encode(), "evaluation.json": json.dumps(evaluation).encode(),
-                 "curve.json": json.dumps({"algorithm": "td3-codesign", "points": curve}).encode()}
-        summary = {"policy": policy, "pd_baseline": pd, "design": {k: v for k, v in design.items() if k != "grid"}}
-        assert self.store.complete(c, files=files, summary=summary, env_steps=TOTAL, attempt_seconds=elapsed_s)
+        evaluation = EvaluationReport.model_validate({
+            "episodes": 8, "seed": 0, "design_valid": True, "policy": {"summary": policy, "episodes": []},
+            "pd_baseline": {"summary": pd, "episodes": []}})
+        files = {"design.json": design.to_json(), "evaluation.json": evaluation.to_json(),
+                 "curve.json": CurveFile(algorithm="td3-codesign", points=curve).to_json()}
+        summary = RunSummary.model_validate({"policy": policy, "pd_baseline": pd, "design": design.figures()})
+        assert self.store.complete(c, files=files, summary=summary.to_dict(), env_steps=TOTAL,
+                                   attempt_seconds=elapsed_s)
 
 
 @pytest.fixture(scope="module")
