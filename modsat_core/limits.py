@@ -66,10 +66,15 @@ class Estimate:
         return BASE_BYTES + self.replay_bytes + self.update_bytes + max(self.step_bytes, self.evaluation_bytes)
 
     def as_dict(self) -> dict:
-        return {"memory_bytes": self.memory_bytes, "replay_bytes": self.replay_bytes,
-                "update_bytes": self.update_bytes, "step_bytes": self.step_bytes,
-                "evaluation_bytes": self.evaluation_bytes, "train_env_steps": self.train_env_steps,
-                "evaluation_steps": self.evaluation_steps}
+        return {
+            "memory_bytes": self.memory_bytes,
+            "replay_bytes": self.replay_bytes,
+            "update_bytes": self.update_bytes,
+            "step_bytes": self.step_bytes,
+            "evaluation_bytes": self.evaluation_bytes,
+            "train_env_steps": self.train_env_steps,
+            "evaluation_steps": self.evaluation_steps,
+        }
 
 
 def estimate(spec: JobSpec) -> Estimate:
@@ -87,9 +92,14 @@ def estimate(spec: JobSpec) -> Estimate:
     # evaluation, flown by the policy and by the PD baseline.
     curve_points = t.total_env_steps // t.eval_every_steps + 1
     evaluation_steps = m.episode_steps * (curve_points * t.eval_episodes + 2 * e.episodes)
-    return Estimate(replay_bytes=replay_capacity(spec) * transition_bytes(N), update_bytes=update, step_bytes=step,
-                    evaluation_bytes=evaluation, train_env_steps=t.total_env_steps,
-                    evaluation_steps=evaluation_steps)
+    return Estimate(
+        replay_bytes=replay_capacity(spec) * transition_bytes(N),
+        update_bytes=update,
+        step_bytes=step,
+        evaluation_bytes=evaluation,
+        train_env_steps=t.total_env_steps,
+        evaluation_steps=evaluation_steps,
+    )
 
 
 @dataclass(frozen=True)
@@ -115,29 +125,58 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
     t, m, e = spec.training, spec.mission, spec.evaluation
     out: list[tuple[tuple[str, ...], str]] = []
     if limits.max_memory_bytes is not None and est.memory_bytes > limits.max_memory_bytes:
-        parts = {("training", "buffer_size"): est.replay_bytes, ("training", "batch_size"): est.update_bytes,
-                 ("training", "num_envs"): est.step_bytes, ("evaluation", "episodes"): est.evaluation_bytes}
+        parts = {
+            ("training", "buffer_size"): est.replay_bytes,
+            ("training", "batch_size"): est.update_bytes,
+            ("training", "num_envs"): est.step_bytes,
+            ("evaluation", "episodes"): est.evaluation_bytes,
+        }
         loc = max(parts, key=lambda k: parts[k])
-        out.append((loc, (
-            f"{'.'.join(loc)}: this run would need about {_gib(est.memory_bytes)} of memory, more than this "
-            f"service allows ({_gib(limits.max_memory_bytes)}, MODSAT_MAX_JOB_MEMORY_GIB): replay buffer "
-            f"{_gib(est.replay_bytes)} ({replay_capacity(spec):,} transitions of a {spec.design.grid_size}^3 grid), "
-            f"one update {_gib(est.update_bytes)} (batch {t.batch_size}), stepping {_gib(est.step_bytes)} "
-            f"({t.num_envs} envs), evaluation {_gib(est.evaluation_bytes)}; lower {'.'.join(loc)}")))
+        out.append(
+            (
+                loc,
+                (
+                    f"{'.'.join(loc)}: this run would need about {_gib(est.memory_bytes)} of memory, more than this "
+                    f"service allows ({_gib(limits.max_memory_bytes)}, MODSAT_MAX_JOB_MEMORY_GIB): replay buffer "
+                    f"{_gib(est.replay_bytes)} ({replay_capacity(spec):,} transitions of a "
+                    f"{spec.design.grid_size}^3 grid), one update {_gib(est.update_bytes)} (batch {t.batch_size}), "
+                    f"stepping {_gib(est.step_bytes)} "
+                    f"({t.num_envs} envs), evaluation {_gib(est.evaluation_bytes)}; lower {'.'.join(loc)}"
+                ),
+            )
+        )
     if limits.max_env_steps is not None and t.total_env_steps > limits.max_env_steps:
-        out.append((("training", "total_env_steps"), (
-            f"training.total_env_steps: {t.total_env_steps:,} is more than this service runs in one job "
-            f"({limits.max_env_steps:,}, MODSAT_MAX_ENV_STEPS)")))
+        out.append(
+            (
+                ("training", "total_env_steps"),
+                (
+                    f"training.total_env_steps: {t.total_env_steps:,} is more than this service runs in one job "
+                    f"({limits.max_env_steps:,}, MODSAT_MAX_ENV_STEPS)"
+                ),
+            )
+        )
     if limits.max_evaluation_steps is not None and est.evaluation_steps > limits.max_evaluation_steps:
         curve = (t.total_env_steps // t.eval_every_steps + 1) * t.eval_episodes
         loc = ("training", "eval_every_steps") if curve >= 2 * e.episodes else ("evaluation", "episodes")
-        out.append((loc, (
-            f"{'.'.join(loc)}: the evaluations would fly {est.evaluation_steps:,} control steps "
-            f"({curve:,} curve episodes and 2 x {e.episodes:,} final ones, {m.episode_steps:,} steps each), "
-            f"more than this service allows ({limits.max_evaluation_steps:,}, MODSAT_MAX_EVALUATION_STEPS)")))
+        out.append(
+            (
+                loc,
+                (
+                    f"{'.'.join(loc)}: the evaluations would fly {est.evaluation_steps:,} control steps "
+                    f"({curve:,} curve episodes and 2 x {e.episodes:,} final ones, {m.episode_steps:,} steps each), "
+                    f"more than this service allows ({limits.max_evaluation_steps:,}, MODSAT_MAX_EVALUATION_STEPS)"
+                ),
+            )
+        )
     if limits.max_trajectory_steps is not None and e.trajectories * m.episode_steps > limits.max_trajectory_steps:
-        out.append((("evaluation", "trajectories"), (
-            f"evaluation.trajectories: {e.trajectories} recorded slews of {m.episode_steps:,} steps are "
-            f"{e.trajectories * m.episode_steps:,} recorded steps, more than this service stores "
-            f"({limits.max_trajectory_steps:,}, MODSAT_MAX_TRAJECTORY_STEPS)")))
+        out.append(
+            (
+                ("evaluation", "trajectories"),
+                (
+                    f"evaluation.trajectories: {e.trajectories} recorded slews of {m.episode_steps:,} steps are "
+                    f"{e.trajectories * m.episode_steps:,} recorded steps, more than this service stores "
+                    f"({limits.max_trajectory_steps:,}, MODSAT_MAX_TRAJECTORY_STEPS)"
+                ),
+            )
+        )
     return out

@@ -16,10 +16,22 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_core import ErrorDetails
 
-from .spec_sections import DesignSpace, Mission, ModuleCatalog, RewardSpec, _Section
+from .spec_sections import GA, DesignSpace, Evaluation, Mission, ModuleCatalog, RewardSpec, _Section
 
-__all__ = ["GA", "DesignSpace", "Evaluation", "JobSpec", "Mission", "ModuleCatalog", "RewardSpec", "SpecError",
-           "Training", "UnrunnableSpec", "format_errors", "parse_spec"]
+__all__ = [
+    "GA",
+    "DesignSpace",
+    "Evaluation",
+    "JobSpec",
+    "Mission",
+    "ModuleCatalog",
+    "RewardSpec",
+    "SpecError",
+    "Training",
+    "UnrunnableSpec",
+    "format_errors",
+    "parse_spec",
+]
 
 SPEC_VERSION: Literal[1] = 1
 
@@ -38,7 +50,9 @@ class Training(_Section):
         ),
     )
     hidden_sizes: list[Annotated[int, Field(ge=4, le=2048)]] = Field(
-        default_factory=lambda: [400, 300], min_length=1, max_length=4,
+        default_factory=lambda: [400, 300],
+        min_length=1,
+        max_length=4,
         description="Wide layers: the shared trunk (`per-module`) or the per-satellite layers (`set`).",
     )
     actor_lr: float = Field(3e-4, gt=0.0, le=1.0, description="Adam learning rate of the shared actor.")
@@ -81,7 +95,9 @@ class Training(_Section):
         ),
     )
     design_learning_starts: int = Field(
-        0, ge=0, le=1_000_000_000,
+        0,
+        ge=0,
+        le=1_000_000_000,
         description=(
             "Env steps before the actor's design layers learn: until then the policy grows the design "
             "it starts from (the full cube around the seed actuator, with the set network) and the "
@@ -90,7 +106,9 @@ class Training(_Section):
         ),
     )
     n_step: int = Field(
-        1, ge=1, le=20,
+        1,
+        ge=1,
+        le=20,
         description=(
             "Steps of reward summed before bootstrapping in the critic's target (n-step return, "
             "stopping at the episode's end). 1 = the paper's one-step TD3."
@@ -118,8 +136,10 @@ class Training(_Section):
     def _check_batch(cls, v: int, info: Any) -> int:
         batch = info.data.get("batch_size")
         if batch is not None and batch > v:
-            raise ValueError(f"buffer_size ({v}) must be at least batch_size ({batch}): an update samples "
-                             f"batch_size transitions from the buffer")
+            raise ValueError(
+                f"buffer_size ({v}) must be at least batch_size ({batch}): an update samples "
+                f"batch_size transitions from the buffer"
+            )
         return v
 
     def noise_at(self, env_steps: int) -> float:
@@ -129,34 +149,6 @@ class Training(_Section):
     def design_exploration_at(self, env_steps: int) -> float:
         """The design exploration probability after ``env_steps`` steps."""
         return self._schedule(self.design_exploration, self.design_exploration_final, env_steps)
-
-
-class GA(_Section):
-    """Genetic-algorithm baseline (Evolution Gym style), TD3 as the inner loop."""
-
-    population_size: int = Field(12, ge=2, le=1000, description="Designs per generation.")
-    survivor_start: float = Field(0.6, ge=0.0, le=1.0, description="Survivor fraction at the start of the budget.")
-    survivor_end: float = Field(0.0, ge=0.0, le=1.0, description="Survivor fraction at the end of the budget.")
-    mutation_rate: float = Field(0.1, ge=0.0, le=1.0, description="Probability that a cell changes type.")
-    steps_per_design: int = Field(
-        50_000, ge=1, le=100_000_000, description="Env steps of the TD3 inner loop for each new design."
-    )
-
-
-class Evaluation(_Section):
-    """The Monte-Carlo evaluation: a fixed, seeded set of slews."""
-
-    episodes: int = Field(100, ge=1, le=10_000, description="Slews in the final Monte-Carlo evaluation.")
-    seed: int = Field(12345, ge=0, le=2**31 - 1, description="Seed of the slew set (independent of training).")
-    trajectories: int = Field(3, ge=0, le=50, description="Episodes whose full time history is kept.")
-    basilisk: bool = Field(
-        False,
-        description=(
-            "Also fly the evaluation slews in Basilisk beside modsat, with the policy and the PD baseline "
-            "(`modsat verify --basilisk`, docs/verification.md); the report is `verification.json`. Needs "
-            "Basilisk where the run trains (`pip install -e '.[basilisk]'`); without it the report says so."
-        ),
-    )
 
 
 class JobSpec(_Section):

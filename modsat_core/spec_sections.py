@@ -201,11 +201,37 @@ class Mission(_Section):
     @model_validator(mode="after")
     def _check_range(self) -> Mission:
         if self.slew_min_deg > self.slew_max_deg:
-            raise ValueError(
-                f"slew_min_deg ({self.slew_min_deg}) must not exceed slew_max_deg ({self.slew_max_deg})"
-            )
+            raise ValueError(f"slew_min_deg ({self.slew_min_deg}) must not exceed slew_max_deg ({self.slew_max_deg})")
         return self
 
     @property
     def control_dt_s(self) -> float:
         return self.physics_dt_s * self.frame_skip
+
+
+class GA(_Section):
+    """Genetic-algorithm baseline (Evolution Gym style), TD3 as the inner loop."""
+
+    population_size: int = Field(12, ge=2, le=1000, description="Designs per generation.")
+    survivor_start: float = Field(0.6, ge=0.0, le=1.0, description="Survivor fraction at the start of the budget.")
+    survivor_end: float = Field(0.0, ge=0.0, le=1.0, description="Survivor fraction at the end of the budget.")
+    mutation_rate: float = Field(0.1, ge=0.0, le=1.0, description="Probability that a cell changes type.")
+    steps_per_design: int = Field(
+        50_000, ge=1, le=100_000_000, description="Env steps of the TD3 inner loop for each new design."
+    )
+
+
+class Evaluation(_Section):
+    """The Monte-Carlo evaluation: a fixed, seeded set of slews."""
+
+    episodes: int = Field(100, ge=1, le=10_000, description="Slews in the final Monte-Carlo evaluation.")
+    seed: int = Field(12345, ge=0, le=2**31 - 1, description="Seed of the slew set (independent of training).")
+    trajectories: int = Field(3, ge=0, le=50, description="Episodes whose full time history is kept.")
+    basilisk: bool = Field(
+        False,
+        description=(
+            "Also fly the evaluation slews in Basilisk beside modsat, with the policy and the PD baseline "
+            "(`modsat verify --basilisk`, docs/verification.md); the report is `verification.json`. Needs "
+            "Basilisk where the run trains (`pip install -e '.[basilisk]'`); without it the report says so."
+        ),
+    )
