@@ -74,8 +74,9 @@ class Record(BaseModel):
         try:
             return cls.model_validate(obj)
         except ValidationError as exc:
-            problems = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or 'the record'}: {e['msg']}"
-                                 for e in exc.errors()[:5])
+            problems = "; ".join(
+                f"{'.'.join(str(p) for p in e['loc']) or 'the record'}: {e['msg']}" for e in exc.errors()[:5]
+            )
             raise ArtefactError(f"{what} is not a modsat {cls.__name__}: {problems}") from None
 
     def to_dict(self) -> dict[str, Any]:
@@ -169,9 +170,15 @@ class DesignReport(_DesignFigures):
     def of(cls, grid: Any, **figures: Any) -> DesignReport:
         """The report of ``grid`` (mass figures, if any, in ``figures``)."""
         g = np.asarray(grid)
-        return cls(grid=g.tolist(), grid_size=int(g.shape[0]), valid=bool(is_valid(g)),
-                   modules=int((g != EMPTY).sum()), actuators=int((g == ACTUATOR).sum()), types=dict(CELL_TYPES),
-                   **figures)
+        return cls(
+            grid=g.tolist(),
+            grid_size=int(g.shape[0]),
+            valid=bool(is_valid(g)),
+            modules=int((g != EMPTY).sum()),
+            actuators=int((g == ACTUATOR).sum()),
+            types=dict(CELL_TYPES),
+            **figures,
+        )
 
     @property
     def array(self) -> np.ndarray:

@@ -47,8 +47,11 @@ def random_valid_designs(rng: np.random.Generator, N: int, count: int) -> list[n
 
 def _flown(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: int) -> dict:
     tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
-    row: dict[str, Any] = {"modules": int((grid != EMPTY).sum()), "actuators": int((grid == ACTUATOR).sum()),
-                           "valid": bool(is_valid(grid))}
+    row: dict[str, Any] = {
+        "modules": int((grid != EMPTY).sum()),
+        "actuators": int((grid == ACTUATOR).sum()),
+        "valid": bool(is_valid(grid)),
+    }
     mc = evaluate_design(actor, grid, spec, episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
     if mc is None:
         row.update({"mean_return": effective_invalid_penalty(spec), "success_rate": 0.0})

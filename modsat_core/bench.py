@@ -48,11 +48,13 @@ class NumpySatellite:
     @staticmethod
     def dcm(q):
         w, x, y, z = q
-        return np.array([
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ])
+        return np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+            ]
+        )
 
     def rk4(self, t, q, w, h, tau_c, dt):
         """One step with constant body torque ``tau_c`` taken from the wheels (h' = -tau_c)."""
@@ -84,8 +86,9 @@ def bench_sim(batch_sizes=(1, 256, 4096), min_seconds: float = 2.0, dtype: str =
     design = Design.from_grid(reference_design(3), modules)
     rng = np.random.default_rng(0)
     draw = draw_episode(rng, mission)
-    sat = NumpySatellite(design.I_B, mean_motion_rad_s(mission.orbit_altitude_km), draw.orbit_phase_rad,
-                         draw.tau_residual_B)
+    sat = NumpySatellite(
+        design.I_B, mean_motion_rad_s(mission.orbit_altitude_km), draw.orbit_phase_rad, draw.tau_residual_B
+    )
     tau_c = np.array([0.01, -0.02, 0.015])
     state = {"t": 0.0, "q": draw.q_BN.copy(), "w": np.zeros(3), "h": np.zeros(3)}
 

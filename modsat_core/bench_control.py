@@ -50,12 +50,14 @@ class _Controller:
         return self.actor(flat_state(sim)).reshape(sim.B, self.K, 3).to(sim.dtype)
 
 
-def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
-                  log: Callable[[str], None] | None = None) -> dict:
+def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str], None] | None = None) -> dict:
     """Train and evaluate; returns the curve and the cost (JSON-ready)."""
     m, t = spec.mission, spec.training
-    grid = np.asarray(spec.design.fixed_design) if spec.design.fixed_design is not None else reference_design(
-        spec.design.grid_size)
+    grid = (
+        np.asarray(spec.design.fixed_design)
+        if spec.design.fixed_design is not None
+        else reference_design(spec.design.grid_size)
+    )
     design = Design.from_grid(grid, spec.modules)
     K, B = design.n_actuators, t.num_envs
     hidden = list(t.hidden_sizes)
@@ -66,26 +68,56 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
     sim.reset(list(range(B)), [draw_episode(r, m) for r in rngs])
     obs_dim, act_dim = flat_state(sim).shape[1], 3 * K
     agent = TD3(MLPActor(obs_dim, act_dim, hidden), MLPCritic(obs_dim, act_dim, hidden), TD3Config.from_training(t))
-    buf = ReplayBuffer({"o": ((obs_dim,), torch.float32), "a": ((act_dim,), torch.float32),
-                        "r": ((), torch.float32), "o2": ((obs_dim,), torch.float32), "d": ((), torch.bool)},
-                       capacity=min(t.buffer_size, max(t.total_env_steps, t.batch_size)))
+    buf = ReplayBuffer(
+        {
+            "o": ((obs_dim,), torch.float32),
+            "a": ((act_dim,), torch.float32),
+            "r": ((), torch.float32),
+            "o2": ((obs_dim,), torch.float32),
+            "d": ((), torch.bool),
+        },
+        capacity=min(t.buffer_size, max(t.total_env_steps, t.batch_size)),
+    )
     curve: list[dict] = []
     steps, credit, next_eval, t0 = 0, 0.0, eval_every, time.monotonic()
 
     def evaluate() -> dict:
-        mc = monte_carlo(design, _Controller(agent.actor, K), m, spec.modules, episodes=spec.evaluation.episodes,
-                         seed=spec.evaluation.seed, dtype=torch.float64)
+        mc = monte_carlo(
+            design,
+            _Controller(agent.actor, K),
+            m,
+            spec.modules,
+            episodes=spec.evaluation.episodes,
+            seed=spec.evaluation.seed,
+            dtype=torch.float64,
+        )
         s = mc.summary((0.25, 1.0))
-        point = {"env_steps": steps, "updates": agent.updates, "wall_s": round(time.monotonic() - t0, 1),
-                 **{k: s[k] for k in ("mean_return", "success_rate", "success_rate_at_0.25_deg",
-                                      "success_rate_at_1_deg", "safety_violations", "median_final_error_deg",
-                                      "median_final_rate_rad_s", "median_slew_time_ratio")}}
+        point = {
+            "env_steps": steps,
+            "updates": agent.updates,
+            "wall_s": round(time.monotonic() - t0, 1),
+            **{
+                k: s[k]
+                for k in (
+                    "mean_return",
+                    "success_rate",
+                    "success_rate_at_0.25_deg",
+                    "success_rate_at_1_deg",
+                    "safety_violations",
+                    "median_final_error_deg",
+                    "median_final_rate_rad_s",
+                    "median_slew_time_ratio",
+                )
+            },
+        }
         curve.append(point)
         if log is not None:
-            log(f"  {steps:,} steps, {agent.updates:,} updates, {point['wall_s']:,.0f} s: return "
+            log(
+                f"  {steps:,} steps, {agent.updates:,} updates, {point['wall_s']:,.0f} s: return "
                 f"{point['mean_return']:.1f}, success {100 * point['success_rate']:.0f} %, median error "
                 f"{point['median_final_error_deg']:.2f} deg, median final rate "
-                f"{point['median_final_rate_rad_s']:.4f} rad/s")
+                f"{point['median_final_rate_rad_s']:.4f} rad/s"
+            )
         return point
 
     while steps + B <= t.total_env_steps:
@@ -113,13 +145,31 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000,
             next_eval += eval_every
     if not curve or curve[-1]["env_steps"] != steps:
         evaluate()
-    pd = monte_carlo(design, PDController, m, spec.modules, episodes=spec.evaluation.episodes,
-                     seed=spec.evaluation.seed)
+    pd = monte_carlo(
+        design, PDController, m, spec.modules, episodes=spec.evaluation.episodes, seed=spec.evaluation.seed
+    )
     best = max(curve, key=lambda p: p["mean_return"])
-    return {"benchmark": "control", "design": grid.tolist(), "hidden_sizes": hidden, "seed": spec.seed,
-            "wall_s": round(time.monotonic() - t0, 1), "env_steps": steps, "updates": agent.updates,
-            "threads": torch.get_num_threads(), "curve": curve, "best": best,
-            "pd_baseline": {k: v for k, v in pd.summary((0.25, 1.0)).items()
-                            if k in ("mean_return", "success_rate", "success_rate_at_0.25_deg",
-                                     "success_rate_at_1_deg", "median_slew_time_ratio")}}
-
+    return {
+        "benchmark": "control",
+        "design": grid.tolist(),
+        "hidden_sizes": hidden,
+        "seed": spec.seed,
+        "wall_s": round(time.monotonic() - t0, 1),
+        "env_steps": steps,
+        "updates": agent.updates,
+        "threads": torch.get_num_threads(),
+        "curve": curve,
+        "best": best,
+        "pd_baseline": {
+            k: v
+            for k, v in pd.summary((0.25, 1.0)).items()
+            if k
+            in (
+                "mean_return",
+                "success_rate",
+                "success_rate_at_0.25_deg",
+                "success_rate_at_1_deg",
+                "median_slew_time_ratio",
+            )
+        },
+    }

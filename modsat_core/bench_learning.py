@@ -21,8 +21,17 @@ import torch
 
 from .spec import JobSpec, parse_spec
 
-KEYS = ("mean_return", "std_return", "success_rate", "success_rate_at_0.25_deg", "success_rate_at_1_deg",
-        "safety_violations", "median_final_error_deg", "median_slew_time_ratio", "median_settling_time_s")
+KEYS = (
+    "mean_return",
+    "std_return",
+    "success_rate",
+    "success_rate_at_0.25_deg",
+    "success_rate_at_1_deg",
+    "safety_violations",
+    "median_final_error_deg",
+    "median_slew_time_ratio",
+    "median_settling_time_s",
+)
 
 
 def _pick(summary: dict | None) -> dict | None:
@@ -42,8 +51,10 @@ def run_one(spec: JobSpec, out_dir: str | None = None, log=None) -> dict:
         last.update(p)
         if log is not None and p.get("eval"):
             e = p["eval"]
-            log(f"  seed {spec.seed} {spec.algorithm}: {p['env_steps']:,} steps, {time.monotonic() - t0:,.0f} s, "
-                f"eval return {e['mean_return']:.1f}, success {100 * e['success_rate']:.0f} %")
+            log(
+                f"  seed {spec.seed} {spec.algorithm}: {p['env_steps']:,} steps, {time.monotonic() - t0:,.0f} s, "
+                f"eval return {e['mean_return']:.1f}, success {100 * e['success_rate']:.0f} %"
+            )
 
     res = train(spec, on_progress=progress)
     wall = time.monotonic() - t0
@@ -55,12 +66,17 @@ def run_one(spec: JobSpec, out_dir: str | None = None, log=None) -> dict:
                 fh.write(data)
     s = res.summary
     return {
-        "seed": spec.seed, "algorithm": spec.algorithm, "wall_s": round(wall, 1), "env_steps": res.env_steps,
+        "seed": spec.seed,
+        "algorithm": spec.algorithm,
+        "wall_s": round(wall, 1),
+        "env_steps": res.env_steps,
         # A GA run's updates are per inner controller, not one count: not reported.
         "updates": last.get("updates") if spec.algorithm != "ga" else None,
         "env_steps_per_s": round(res.env_steps / wall, 1),
-        "design": s["design"], "designs_evaluated": s.get("designs_evaluated"),
-        "policy": _pick(s["policy"]), "pd_baseline": _pick(s["pd_baseline"]),
+        "design": s["design"],
+        "designs_evaluated": s.get("designs_evaluated"),
+        "policy": _pick(s["policy"]),
+        "pd_baseline": _pick(s["pd_baseline"]),
     }
 
 
@@ -72,8 +88,13 @@ def _stats(values: list[float]) -> dict:
 
 
 def _environment() -> dict:
-    return {"torch": torch.__version__, "threads": torch.get_num_threads(), "cpus": os.cpu_count(),
-            "machine": platform.machine(), "cuda": torch.cuda.is_available()}
+    return {
+        "torch": torch.__version__,
+        "threads": torch.get_num_threads(),
+        "cpus": os.cpu_count(),
+        "machine": platform.machine(),
+        "cuda": torch.cuda.is_available(),
+    }
 
 
 def _seeded(spec: JobSpec, seeds: list[int]) -> list[JobSpec]:
@@ -83,11 +104,18 @@ def _seeded(spec: JobSpec, seeds: list[int]) -> list[JobSpec]:
 
 def bench_learn(spec: JobSpec, seeds: list[int], out_dir: str | None = None, log=None) -> dict:
     runs = [run_one(s, out_dir, log) for s in _seeded(spec, seeds)]
-    agg = {k: _stats([r["policy"][k] for r in runs]) for k in ("mean_return", "success_rate_at_0.25_deg",
-                                                                 "success_rate_at_1_deg")}
+    agg = {
+        k: _stats([r["policy"][k] for r in runs])
+        for k in ("mean_return", "success_rate_at_0.25_deg", "success_rate_at_1_deg")
+    }
     agg["wall_s"] = _stats([r["wall_s"] for r in runs])
-    return {"benchmark": "learn", "spec": spec.model_dump(mode="json"), "environment": _environment(),
-            "runs": runs, "aggregate": agg}
+    return {
+        "benchmark": "learn",
+        "spec": spec.model_dump(mode="json"),
+        "environment": _environment(),
+        "runs": runs,
+        "aggregate": agg,
+    }
 
 
 def ga_spec_like(rl: JobSpec, population: int, steps_per_design: int) -> JobSpec:
@@ -99,16 +127,24 @@ def ga_spec_like(rl: JobSpec, population: int, steps_per_design: int) -> JobSpec
     return parse_spec(json.dumps(d))
 
 
-def bench_rl_vs_ga(rl: JobSpec, seeds: list[int], population: int, steps_per_design: int,
-                   out_dir: str | None = None, log=None) -> dict:
+def bench_rl_vs_ga(
+    rl: JobSpec, seeds: list[int], population: int, steps_per_design: int, out_dir: str | None = None, log=None
+) -> dict:
     ga = ga_spec_like(rl, population, steps_per_design)
-    out: dict[str, Any] = {"benchmark": "rl-vs-ga", "environment": _environment(),
-                           "env_step_budget": rl.training.total_env_steps, "rl_spec": rl.model_dump(mode="json"),
-                           "ga": ga.ga.model_dump(mode="json"), "runs": {"rl": [], "ga": []}}
+    out: dict[str, Any] = {
+        "benchmark": "rl-vs-ga",
+        "environment": _environment(),
+        "env_step_budget": rl.training.total_env_steps,
+        "rl_spec": rl.model_dump(mode="json"),
+        "ga": ga.ga.model_dump(mode="json"),
+        "runs": {"rl": [], "ga": []},
+    }
     for rl_s, ga_s in zip(_seeded(rl, seeds), _seeded(ga, seeds)):
         out["runs"]["rl"].append(run_one(rl_s, out_dir, log))
         out["runs"]["ga"].append(run_one(ga_s, out_dir, log))
     for key in ("rl", "ga"):
-        out[key] = {k: _stats([r["policy"][k] for r in out["runs"][key]])
-                    for k in ("mean_return", "success_rate", "median_final_error_deg")}
+        out[key] = {
+            k: _stats([r["policy"][k] for r in out["runs"][key]])
+            for k in ("mean_return", "success_rate", "median_final_error_deg")
+        }
     return out

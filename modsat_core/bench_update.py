@@ -36,10 +36,14 @@ def _compact_batch(N: int, batch: int, gen: torch.Generator) -> Compact:
     grid = torch.ones(batch, C, dtype=torch.uint8)
     grid[:, C // 2] = ACTUATOR  # the centre cell
     q = torch.randn(batch, 4, generator=gen)
-    return Compact(grid=grid, design_step=torch.full((batch,), 10, dtype=torch.int16),
-                   q_BN=q / q.norm(dim=-1, keepdim=True), q_TN=torch.tensor([[1.0, 0, 0, 0]]).expand(batch, 4),
-                   omega_B=torch.randn(batch, 3, generator=gen) * 0.1,
-                   h_cells=(torch.randn(batch, C, 3, generator=gen) * 0.1).to(torch.float16))
+    return Compact(
+        grid=grid,
+        design_step=torch.full((batch,), 10, dtype=torch.int16),
+        q_BN=q / q.norm(dim=-1, keepdim=True),
+        q_TN=torch.tensor([[1.0, 0, 0, 0]]).expand(batch, 4),
+        omega_B=torch.randn(batch, 3, generator=gen) * 0.1,
+        h_cells=(torch.randn(batch, C, 3, generator=gen) * 0.1).to(torch.float16),
+    )
 
 
 def _cases(N: int, hidden: list[int], batch: int, gen: torch.Generator) -> dict:
@@ -49,9 +53,15 @@ def _cases(N: int, hidden: list[int], batch: int, gen: torch.Generator) -> dict:
     cfg = TD3Config(actor_lr=1e-3, critic_lr=1e-3)
     flat_dim = N_CONTROL_GLOBAL + 3  # one actuator
     out: dict[str, tuple] = {
-        "flat": (TD3(MLPActor(flat_dim, 3, hidden), MLPCritic(flat_dim, 3, hidden), cfg),
-                 torch.randn(batch, flat_dim, generator=gen), torch.rand(batch, 3, generator=gen) * 2 - 1,
-                 reward, torch.randn(batch, flat_dim, generator=gen), terminal)}
+        "flat": (
+            TD3(MLPActor(flat_dim, 3, hidden), MLPCritic(flat_dim, 3, hidden), cfg),
+            torch.randn(batch, flat_dim, generator=gen),
+            torch.rand(batch, 3, generator=gen) * 2 - 1,
+            reward,
+            torch.randn(batch, flat_dim, generator=gen),
+            terminal,
+        )
+    }
     obs = observe_compact(_compact_batch(N, batch, gen), N, 10, 0.5)
     nxt = observe_compact(_compact_batch(N, batch, gen), N, 10, 0.5)
     action = (torch.rand(batch, N**3, 3, generator=gen) * 2 - 1) * obs.act_mask.unsqueeze(-1)
@@ -61,8 +71,14 @@ def _cases(N: int, hidden: list[int], batch: int, gen: torch.Generator) -> dict:
     return out
 
 
-def bench_update(grids: tuple[int, ...] = (3, 5), hidden: tuple[int, ...] = (256, 256), batch: int = 256,
-                 rounds: int = 5, updates_per_round: int = 2, threads: int | None = 1) -> dict:
+def bench_update(
+    grids: tuple[int, ...] = (3, 5),
+    hidden: tuple[int, ...] = (256, 256),
+    batch: int = 256,
+    rounds: int = 5,
+    updates_per_round: int = 2,
+    threads: int | None = 1,
+) -> dict:
     """Milliseconds per TD3 update for ``flat`` and each co-design network, per grid."""
     if threads is not None:
         torch.set_num_threads(threads)
@@ -93,7 +109,15 @@ def bench_update(grids: tuple[int, ...] = (3, 5), hidden: tuple[int, ...] = (256
         row["features_ms"] = round(statistics.median(feat), 2)
         row["cells"] = N**3
         results[f"{N}x{N}x{N}"] = row
-    return {"benchmark": "update", "unit": "milliseconds per TD3 update (critics; actor and targets every 2nd)",
-            "hidden_sizes": list(hidden), "batch_size": batch, "rounds": rounds,
-            "updates_per_round": updates_per_round, "torch": torch.__version__, "threads": torch.get_num_threads(),
-            "machine": platform.machine(), "results": results}
+    return {
+        "benchmark": "update",
+        "unit": "milliseconds per TD3 update (critics; actor and targets every 2nd)",
+        "hidden_sizes": list(hidden),
+        "batch_size": batch,
+        "rounds": rounds,
+        "updates_per_round": updates_per_round,
+        "torch": torch.__version__,
+        "threads": torch.get_num_threads(),
+        "machine": platform.machine(),
+        "results": results,
+    }

@@ -32,12 +32,12 @@ StopFn = Callable[[], bool]
 CHECKPOINT_BUFFER_LIMIT_BYTES = 256 * 2**20
 CHECKPOINT_VERSION = 2
 
+
 def resolve_device(name: str) -> str:
     if name == "auto":
         return "cuda" if torch.cuda.is_available() else "cpu"
     if name == "cuda" and not torch.cuda.is_available():
-        raise UnrunnableSpec("training.device is 'cuda' but torch sees no GPU on this machine; "
-                             "use 'auto' or 'cpu'")
+        raise UnrunnableSpec("training.device is 'cuda' but torch sees no GPU on this machine; use 'auto' or 'cpu'")
     return name
 
 
@@ -58,8 +58,10 @@ def checkpoint_from_bytes(data: bytes) -> dict:
         with torch.serialization.safe_globals(_NUMPY_ARRAYS):
             ckpt = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
-        raise ValueError("not a modsat checkpoint: it holds objects other than tensors and plain data, which are "
-                         f"not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}") from None
+        raise ValueError(
+            "not a modsat checkpoint: it holds objects other than tensors and plain data, which are "
+            f"not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}"
+        ) from None
     if not isinstance(ckpt, dict):
         raise ValueError("not a modsat checkpoint")
     return ckpt
@@ -67,9 +69,13 @@ def checkpoint_from_bytes(data: bytes) -> dict:
 
 #: What an older checkpoint's numpy grid needs from ``weights_only`` loading: the array
 #: constructor (under numpy 2's and numpy 1's module names) and the array and dtype types.
-_NUMPY_ARRAYS: list = [np.ndarray, np.dtype, *(type(np.dtype(t)) for t in (np.int64, np.int8, np.float64)),
-                       (np_multiarray._reconstruct, "numpy._core.multiarray._reconstruct"),
-                       (np_multiarray._reconstruct, "numpy.core.multiarray._reconstruct")]
+_NUMPY_ARRAYS: list = [
+    np.ndarray,
+    np.dtype,
+    *(type(np.dtype(t)) for t in (np.int64, np.int8, np.float64)),
+    (np_multiarray._reconstruct, "numpy._core.multiarray._reconstruct"),
+    (np_multiarray._reconstruct, "numpy.core.multiarray._reconstruct"),
+]
 
 
 def _plain(x):
@@ -90,12 +96,24 @@ def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
     """The compact transition layout: two compact states, the action, reward, terminal, and
     ``done`` (the episode ended there, also by its time limit: where n-step returns stop)."""
     C = N**3
-    state = {"grid": ((C,), torch.uint8), "design_step": ((), torch.int16), "q_BN": ((4,), torch.float32),
-             "q_TN": ((4,), torch.float32), "omega_B": ((3,), torch.float32), "h_cells": ((C, 3), torch.float16)}
+    state = {
+        "grid": ((C,), torch.uint8),
+        "design_step": ((), torch.int16),
+        "q_BN": ((4,), torch.float32),
+        "q_TN": ((4,), torch.float32),
+        "omega_B": ((3,), torch.float32),
+        "h_cells": ((C, 3), torch.float16),
+    }
     fields = {f"obs_{k}": v for k, v in state.items()}
     fields.update({f"next_{k}": v for k, v in state.items()})
-    fields.update({"action": ((C, 3), torch.float16), "reward": ((), torch.float32), "terminal": ((), torch.bool),
-                   "done": ((), torch.bool)})
+    fields.update(
+        {
+            "action": ((C, 3), torch.float16),
+            "reward": ((), torch.float32),
+            "terminal": ((), torch.bool),
+            "done": ((), torch.bool),
+        }
+    )
     return fields
 
 

@@ -70,8 +70,9 @@ def observe_compact(c: Compact, N: int, design_steps: int, rate_limit_rad_s: flo
     """Rebuild per-cell observations from compact rows (used when sampling the buffer)."""
     B = c.grid.shape[0]
     phys = PhysState(q_BN=c.q_BN.float(), q_TN=c.q_TN.float(), omega_B=c.omega_B.float(), h_cells=c.h_cells.float())
-    return cell_observation(c.grid.long().reshape(B, N, N, N), c.design_step.long(), design_steps, phys,
-                            rate_limit_rad_s)
+    return cell_observation(
+        c.grid.long().reshape(B, N, N, N), c.design_step.long(), design_steps, phys, rate_limit_rad_s
+    )
 
 
 @dataclass
@@ -96,8 +97,14 @@ class CoDesignEnv:
         self.fixed_grid = None if fixed_grid is None else torch.as_tensor(np.asarray(fixed_grid), device=self.device)
         self.penalty = effective_invalid_penalty(spec)
         eye = np.tile(np.eye(3), (num_envs, 1, 1))
-        self.sim = SlewSim(eye, np.zeros((num_envs, self.C), dtype=bool), spec.mission, spec.modules,
-                           dtype=torch.float32, device=self.device)
+        self.sim = SlewSim(
+            eye,
+            np.zeros((num_envs, self.C), dtype=bool),
+            spec.mission,
+            spec.modules,
+            dtype=torch.float32,
+            device=self.device,
+        )
         self.rngs = [np.random.default_rng([seed, 1, i]) for i in range(num_envs)]
         self.design_rng = np.random.default_rng([seed, 2])
         self.grids = torch.zeros(num_envs, self.N, self.N, self.N, dtype=torch.long, device=self.device)
@@ -111,7 +118,9 @@ class CoDesignEnv:
         return Compact(
             grid=self.grids.reshape(self.B, -1).to(torch.uint8),
             design_step=self.design_step.to(torch.int16),
-            q_BN=st.q_BN.clone(), q_TN=self.sim.q_TN.clone(), omega_B=st.omega_B.clone(),
+            q_BN=st.q_BN.clone(),
+            q_TN=self.sim.q_TN.clone(),
+            omega_B=st.omega_B.clone(),
             h_cells=(st.h_B / self.sim.h_scale_Nms).to(torch.float16),
         )
 
@@ -174,8 +183,11 @@ class CoDesignEnv:
         self.ep_return += reward
         next_state = self.compact()
         for i in done.nonzero().squeeze(-1).tolist():
-            row = {"return": float(self.ep_return[i]), "grid": self.grids[i].cpu().numpy().tolist(),
-                   "valid": bool(flying[i])}
+            row = {
+                "return": float(self.ep_return[i]),
+                "grid": self.grids[i].cpu().numpy().tolist(),
+                "valid": bool(flying[i]),
+            }
             if flying[i]:
                 row.update({k: (v[i].item()) for k, v in out.final.items()})
             else:
@@ -188,13 +200,23 @@ class CoDesignEnv:
     def state_dict(self) -> dict:
         st, p = self.sim.state, self.sim.plant
         return {
-            "grids": self.grids.clone(), "design_step": self.design_step.clone(), "ep_return": self.ep_return.clone(),
-            "q_BN": st.q_BN.clone(), "omega_B": st.omega_B.clone(), "h_B": st.h_B.clone(), "t_s": st.t_s.clone(),
-            "q_TN": self.sim.q_TN.clone(), "steps": self.sim.steps.clone(), "phi_prev": self.sim.phi_prev.clone(),
-            "I_B": p.I_B.clone(), "mask": p.actuator_mask.clone(), "phase": p.orbit_phase_rad.clone(),
+            "grids": self.grids.clone(),
+            "design_step": self.design_step.clone(),
+            "ep_return": self.ep_return.clone(),
+            "q_BN": st.q_BN.clone(),
+            "omega_B": st.omega_B.clone(),
+            "h_B": st.h_B.clone(),
+            "t_s": st.t_s.clone(),
+            "q_TN": self.sim.q_TN.clone(),
+            "steps": self.sim.steps.clone(),
+            "phi_prev": self.sim.phi_prev.clone(),
+            "I_B": p.I_B.clone(),
+            "mask": p.actuator_mask.clone(),
+            "phase": p.orbit_phase_rad.clone(),
             "tau_res": p.tau_residual_B.clone(),
             "metrics": {k: v.clone() for k, v in vars(self.sim.metrics).items()},
-            "rngs": [r.bit_generator.state for r in self.rngs], "design_rng": self.design_rng.bit_generator.state,
+            "rngs": [r.bit_generator.state for r in self.rngs],
+            "design_rng": self.design_rng.bit_generator.state,
         }
 
     def load_state_dict(self, d: dict) -> None:

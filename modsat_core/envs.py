@@ -97,8 +97,9 @@ class SatelliteSlewEnv(gym.Env):
 
     def __init__(self, spec: JobSpec | dict | None = None, design=None, dtype: str = "float64", device: str = "cpu"):
         self.spec_model, self.design = _resolve(spec, design)
-        self.sim = SlewSim.from_designs([self.design], self.spec_model.mission, self.spec_model.modules,
-                                        dtype=_DTYPES[dtype], device=device)
+        self.sim = SlewSim.from_designs(
+            [self.design], self.spec_model.mission, self.spec_model.modules, dtype=_DTYPES[dtype], device=device
+        )
         self.observation_space, self.action_space = _spaces(self.sim)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -131,12 +132,23 @@ class SatelliteSlewVectorEnv(gym.vector.VectorEnv):
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
     single_observation_space: spaces.Box  # what _spaces builds (VectorEnv declares the base Space)
 
-    def __init__(self, num_envs: int, spec: JobSpec | dict | None = None, design=None,
-                 dtype: str = "float64", device: str = "cpu"):
+    def __init__(
+        self,
+        num_envs: int,
+        spec: JobSpec | dict | None = None,
+        design=None,
+        dtype: str = "float64",
+        device: str = "cpu",
+    ):
         self.num_envs = num_envs
         self.spec_model, self.design = _resolve(spec, design)
-        self.sim = SlewSim.from_designs([self.design] * num_envs, self.spec_model.mission,
-                                        self.spec_model.modules, dtype=_DTYPES[dtype], device=device)
+        self.sim = SlewSim.from_designs(
+            [self.design] * num_envs,
+            self.spec_model.mission,
+            self.spec_model.modules,
+            dtype=_DTYPES[dtype],
+            device=device,
+        )
         self.single_observation_space, self.single_action_space = _spaces(self.sim)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
@@ -159,8 +171,9 @@ class SatelliteSlewVectorEnv(gym.vector.VectorEnv):
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} envs")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         idx = list(range(self.num_envs))
-        self.sim.reset(idx, [draw_episode(self._rngs[i], self.spec_model.mission, self._options_for(options, i))
-                             for i in idx])
+        self.sim.reset(
+            idx, [draw_episode(self._rngs[i], self.spec_model.mission, self._options_for(options, i)) for i in idx]
+        )
         self._autoreset[:] = False
         return self._obs(), _info(self.sim, slice(None))
 

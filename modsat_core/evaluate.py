@@ -54,8 +54,12 @@ class MonteCarloResult:
             "max_peak_rate_rad_s": max(e["peak_rate_rad_s"] for e in ep),
         }
         for tol in tolerances_deg:
-            ok = [e["final_error_deg"] <= tol and e["final_rate_rad_s"] <= e["rate_tolerance_rad_s"]
-                  and not e["safety_violation"] for e in ep]
+            ok = [
+                e["final_error_deg"] <= tol
+                and e["final_rate_rad_s"] <= e["rate_tolerance_rad_s"]
+                and not e["safety_violation"]
+                for e in ep
+            ]
             out[f"success_rate_at_{tol:g}_deg"] = sum(ok) / n
         return out
 
@@ -136,9 +140,11 @@ def monte_carlo(
         stack = {k: torch.stack([h[i] for h in v]).cpu().numpy() for k, v in hist.items()}
         # Stop a trajectory where its episode ended (a safety violation ends it early).
         n = int(round(per_episode[i]["duration_s"] / mission.control_dt_s)) + 1
-        trajectories.append({
-            **{k: v[:n].tolist() for k, v in stack.items()},
-            "q_TN": sim.q_TN[i].cpu().tolist(),
-            "metrics": per_episode[i],
-        })
+        trajectories.append(
+            {
+                **{k: v[:n].tolist() for k, v in stack.items()},
+                "q_TN": sim.q_TN[i].cpu().tolist(),
+                "metrics": per_episode[i],
+            }
+        )
     return MonteCarloResult(episodes=per_episode, trajectories=trajectories)

@@ -47,8 +47,14 @@ RATE_GAIN = 50.0
 N_CONTROL_GLOBAL = N_CONTROL - 3
 
 
-def control_globals(q_BT: Tensor, omega_B: Tensor, rate_limit_rad_s: float, fine_gain: float = FINE_GAIN,
-                    finer_gain: float = FINER_GAIN, rate_gain: float = RATE_GAIN) -> Tensor:
+def control_globals(
+    q_BT: Tensor,
+    omega_B: Tensor,
+    rate_limit_rad_s: float,
+    fine_gain: float = FINE_GAIN,
+    finer_gain: float = FINER_GAIN,
+    rate_gain: float = RATE_GAIN,
+) -> Tensor:
     """(B, 20) the satellite-wide control features from the error quaternion and body rate.
 
     One function for the training features, the flat controller of ``bench control`` and
@@ -56,10 +62,20 @@ def control_globals(q_BT: Tensor, omega_B: Tensor, rate_limit_rad_s: float, fine
     three cannot drift apart.
     """
     w, v = q_BT[:, :1], q_BT[:, 1:]
-    qdot = torch.cat((-0.5 * (v * omega_B).sum(-1, keepdim=True),
-                      0.5 * (w * omega_B + torch.cross(v, omega_B, dim=-1))), dim=-1)
-    return torch.cat((q_BT, qdot * (2.0 / rate_limit_rad_s), omega_B / rate_limit_rad_s,
-                      torch.tanh(fine_gain * v), torch.tanh(finer_gain * v), torch.tanh(rate_gain * omega_B)), dim=-1)
+    qdot = torch.cat(
+        (-0.5 * (v * omega_B).sum(-1, keepdim=True), 0.5 * (w * omega_B + torch.cross(v, omega_B, dim=-1))), dim=-1
+    )
+    return torch.cat(
+        (
+            q_BT,
+            qdot * (2.0 / rate_limit_rad_s),
+            omega_B / rate_limit_rad_s,
+            torch.tanh(fine_gain * v),
+            torch.tanh(finer_gain * v),
+            torch.tanh(rate_gain * omega_B),
+        ),
+        dim=-1,
+    )
 
 
 @dataclass
@@ -85,8 +101,9 @@ class CellObs:
 
     def rows(self, start: int, stop: int) -> CellObs:
         """Rows ``start:stop`` as views (no copy)."""
-        return CellObs(self.x[start:stop], self.act_mask[start:stop], self.value_mask[start:stop],
-                       self.design[start:stop])
+        return CellObs(
+            self.x[start:stop], self.act_mask[start:stop], self.value_mask[start:stop], self.design[start:stop]
+        )
 
 
 @dataclass
@@ -154,8 +171,15 @@ def cell_observation(
     valid = torch.ones(B, dtype=torch.bool, device=dev)
     if bool(design.any()):
         valid[design] = valid_mask_batched(grids[design])
-    per_sat = torch.stack((design.to(torch.float32), (flat == ACTUATOR).sum(dim=1).to(torch.float32) / C,
-                           count.to(torch.float32) / C, valid.to(torch.float32)), dim=-1)
+    per_sat = torch.stack(
+        (
+            design.to(torch.float32),
+            (flat == ACTUATOR).sum(dim=1).to(torch.float32) / C,
+            count.to(torch.float32) / C,
+            valid.to(torch.float32),
+        ),
+        dim=-1,
+    )
     common = torch.cat((_one_hot(flat), pos, dist, per_sat.unsqueeze(1).expand(B, C, 4)), dim=-1)
 
     dpart = torch.zeros(B, C, N_DESIGN, device=dev)

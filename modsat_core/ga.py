@@ -83,10 +83,19 @@ class GARun:
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:
-        return {"used": self.used, "generation": self.generation, "records": self.records,
-                "population": self.population, "pending": [g.tolist() for g in self.pending],
-                "generations": self.generations, "seen": sorted(self.seen), "best_actor": self.best_actor,
-                "inner": self.inner_ckpt, "curve": self.curve, "rng": self.rng.bit_generator.state}
+        return {
+            "used": self.used,
+            "generation": self.generation,
+            "records": self.records,
+            "population": self.population,
+            "pending": [g.tolist() for g in self.pending],
+            "generations": self.generations,
+            "seen": sorted(self.seen),
+            "best_actor": self.best_actor,
+            "inner": self.inner_ckpt,
+            "curve": self.curve,
+            "rng": self.rng.bit_generator.state,
+        }
 
     def load_state_dict(self, d: dict) -> None:
         self.used, self.generation = d["used"], d["generation"]
@@ -115,9 +124,16 @@ class GARun:
 
         self.pending = [draw_unique(self.rng, child, self.seen) for _ in range(P - n_surv)]
         self.population = list(survivors)
-        self.generations.append({"generation": self.generation, "env_steps": self.used,
-                                 "budget_share": min(1.0, self.used / self.spec.training.total_env_steps),
-                                 "survivor_fraction": frac, "survivors": n_surv, "children": P - n_surv})
+        self.generations.append(
+            {
+                "generation": self.generation,
+                "env_steps": self.used,
+                "budget_share": min(1.0, self.used / self.spec.training.total_env_steps),
+                "survivor_fraction": frac,
+                "survivors": n_surv,
+                "children": P - n_surv,
+            }
+        )
 
     def _evaluate_pending(self, on_progress, on_checkpoint, should_stop) -> bool:
         """Train a controller for each pending design in turn; True if stopped."""
@@ -133,11 +149,19 @@ class GARun:
             offset = self.used
 
             def progress(p: dict, _o=offset, _g=self.generation) -> None:
-                on_progress(ProgressRecord.model_validate({
-                    **p, "env_steps": _o + p["env_steps"], "total_env_steps": total,
-                    "phase": f"ga generation {_g}, design {len(self.records) + 1}",
-                    "eval": None if p.get("eval") is None else {**p["eval"], "env_steps": _o + p["eval"]["env_steps"]},
-                }).to_dict())
+                on_progress(
+                    ProgressRecord.model_validate(
+                        {
+                            **p,
+                            "env_steps": _o + p["env_steps"],
+                            "total_env_steps": total,
+                            "phase": f"ga generation {_g}, design {len(self.records) + 1}",
+                            "eval": None
+                            if p.get("eval") is None
+                            else {**p["eval"], "env_steps": _o + p["eval"]["env_steps"]},
+                        }
+                    ).to_dict()
+                )
 
             def checkpoint(inner: dict) -> None:
                 self.inner_ckpt = inner
@@ -149,25 +173,40 @@ class GARun:
             assert run.best is not None  # a finished run has evaluated at least once
             fitness = run.best["mean_return"]
             self.used += run.env_steps
-            self.records.append({"grid": grid.tolist(), "fitness": fitness, "generation": self.generation,
-                                 "env_steps": run.env_steps, "seed": seed,
-                                 "success_rate": max(p["success_rate"] for p in run.curve)})
+            self.records.append(
+                {
+                    "grid": grid.tolist(),
+                    "fitness": fitness,
+                    "generation": self.generation,
+                    "env_steps": run.env_steps,
+                    "seed": seed,
+                    "success_rate": max(p["success_rate"] for p in run.curve),
+                }
+            )
             self.population.append(len(self.records) - 1)
             if self.best_actor is None or fitness > self.best_actor["fitness"]:
-                self.best_actor = {"fitness": fitness, "grid": grid.tolist(), "actor": run.best["actor"],
-                                   "record": len(self.records) - 1}
+                self.best_actor = {
+                    "fitness": fitness,
+                    "grid": grid.tolist(),
+                    "actor": run.best["actor"],
+                    "record": len(self.records) - 1,
+                }
             self.pending.pop(0)
-            self.curve.append(CurvePoint(
-                env_steps=self.used, mean_return=self.best_actor["fitness"],
-                success_rate=self.records[self.best_actor["record"]]["success_rate"], design_return=fitness,
-                generation=self.generation).to_dict())
+            self.curve.append(
+                CurvePoint(
+                    env_steps=self.used,
+                    mean_return=self.best_actor["fitness"],
+                    success_rate=self.records[self.best_actor["record"]]["success_rate"],
+                    design_return=fitness,
+                    generation=self.generation,
+                ).to_dict()
+            )
             on_checkpoint(self.state_dict())
         return False
 
     def train(self, on_progress, on_checkpoint, should_stop, checkpoint: dict | None):
         def wrap(state: dict) -> None:
-            on_checkpoint({"version": CHECKPOINT_VERSION, "algorithm": "ga", "env_steps": state["used"],
-                           "run": state})
+            on_checkpoint({"version": CHECKPOINT_VERSION, "algorithm": "ga", "env_steps": state["used"], "run": state})
 
         if checkpoint is not None:
             self.load_state_dict(checkpoint["run"])
@@ -180,8 +219,11 @@ class GARun:
             if total - self.used < self.spec.training.num_envs:  # not one more batch of steps
                 break
             self._next_generation()
-        on_progress(ProgressRecord(env_steps=self.used, total_env_steps=total, updates=0, phase="evaluating",
-                                   eval=None).to_dict())
+        on_progress(
+            ProgressRecord(
+                env_steps=self.used, total_env_steps=total, updates=0, phase="evaluating", eval=None
+            ).to_dict()
+        )
         assert self.best_actor is not None  # at least one design was evaluated
         actor = actor_from_state(self.spec, self.best_actor["actor"])
         grid = np.asarray(self.best_actor["grid"], dtype=np.int64)

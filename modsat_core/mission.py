@@ -53,9 +53,10 @@ def draw_episode(rng: np.random.Generator, mission: Mission, options: dict | Non
         raise ValueError(f"unknown reset option(s) {sorted(unknown)}; allowed: q_BN, q_TN, omega_B")
     axis = quat.random_axes(rng, 1)[0]
     angle = rng.uniform(mission.slew_min_deg, mission.slew_max_deg) * quat.DEG
-    tau_res = np.asarray(mission.residual_torque_Nm, dtype=np.float64) + rng.normal(
-        0.0, 1.0, size=3
-    ) * mission.residual_torque_std_Nm
+    tau_res = (
+        np.asarray(mission.residual_torque_Nm, dtype=np.float64)
+        + rng.normal(0.0, 1.0, size=3) * mission.residual_torque_std_Nm
+    )
     phase = rng.uniform(0.0, 2.0 * math.pi)
 
     q_BN = _unit_quaternion(options["q_BN"], "q_BN") if "q_BN" in options else IDENTITY_WXYZ.copy()

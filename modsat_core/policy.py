@@ -90,8 +90,9 @@ class ExportedController(nn.Module):
         C = N**3
         ctrl = PolicyController(actor, grid, spec)
         # Constant part of the per-cell features: everything but the state-dependent slots.
-        probe = PhysState(torch.tensor([[1.0, 0, 0, 0]]), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros(1, 3),
-                          torch.zeros(1, C, 3))
+        probe = PhysState(
+            torch.tensor([[1.0, 0, 0, 0]]), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros(1, 3), torch.zeros(1, C, 3)
+        )
         D = spec.design.design_steps
         base = cell_observation(ctrl.grid.unsqueeze(0), torch.tensor([D]), D, probe, spec.mission.rate_limit_rad_s)
         self.register_buffer("base_x", base.x[0].clone())
@@ -117,7 +118,7 @@ class ExportedController(nn.Module):
         h_cells[:, self.act_cells] = h_B.to(x.dtype) / self.h_scale
         g0, g1 = self.c0, self.c0 + self.n_glob
         x[:, :, g0:g1] = glob.unsqueeze(1).to(x.dtype) * self.occupied
-        x[:, :, g1:g1 + 3] = h_cells * self.occupied
+        x[:, :, g1 : g1 + 3] = h_cells * self.occupied
         design = torch.zeros(B, dtype=torch.bool)
         a = self.actor.act(x, self.act_mask.expand(B, C), self.value_mask.expand(B, C), design)
         return a[:, self.act_cells] * self.tau_max

@@ -19,7 +19,6 @@ from .spec import JobSpec
 POLICY_VERSION = 2
 
 
-
 def new_actor(spec: JobSpec) -> torch.nn.Module:
     """The co-design actor of a spec (``training.network``, ``training.hidden_sizes``)."""
     return make_actor(spec.training.network, N_FEATURES, list(spec.training.hidden_sizes))
@@ -35,12 +34,19 @@ def actor_from_state(spec: JobSpec, state: dict) -> torch.nn.Module:
 
 def policy_bytes(actor: torch.nn.Module, grid: np.ndarray | None, spec: JobSpec) -> bytes:
     buf = io.BytesIO()
-    torch.save({
-        "format": "modsat-policy", "version": POLICY_VERSION, "spec": spec.model_dump(mode="json"),
-        "grid": None if grid is None else np.asarray(grid).tolist(), "network": spec.training.network,
-        "hidden_sizes": list(spec.training.hidden_sizes), "n_features": N_FEATURES,
-        "actor": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
-    }, buf)
+    torch.save(
+        {
+            "format": "modsat-policy",
+            "version": POLICY_VERSION,
+            "spec": spec.model_dump(mode="json"),
+            "grid": None if grid is None else np.asarray(grid).tolist(),
+            "network": spec.training.network,
+            "hidden_sizes": list(spec.training.hidden_sizes),
+            "n_features": N_FEATURES,
+            "actor": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
+        },
+        buf,
+    )
     return buf.getvalue()
 
 
@@ -53,14 +59,18 @@ def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpe
     try:
         d = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
-        raise ValueError("not a modsat policy file: it holds objects other than tensors and plain data, which "
-                         f"are not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}") from None
+        raise ValueError(
+            "not a modsat policy file: it holds objects other than tensors and plain data, which "
+            f"are not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}"
+        ) from None
     if not isinstance(d, dict) or d.get("format") != "modsat-policy":
         raise ValueError("not a modsat policy file")
     if d.get("version") != POLICY_VERSION or d.get("n_features") != N_FEATURES:
-        raise ValueError(f"policy file version {d.get('version')} ({d.get('n_features')} features) is from an "
-                         f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features): "
-                         "train the run again")
+        raise ValueError(
+            f"policy file version {d.get('version')} ({d.get('n_features')} features) is from an "
+            f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features): "
+            "train the run again"
+        )
     spec = JobSpec.model_validate(d["spec"])
     actor = actor_from_state(spec, d["actor"])
     grid = None if d["grid"] is None else np.asarray(d["grid"], dtype=np.int64)

@@ -38,25 +38,39 @@ _NO_EARLY_EXIT = {"safety_penalty_per_remaining_step": 1.0}
 # zero over the budget, and a reward that pays holding still inside the cone instead of
 # charging it the progress penalty.
 _CPU_TRAINING = {
-    "network": "set", "hidden_sizes": [256, 256], "actor_lr": 1e-3, "critic_lr": 1e-3, "batch_size": 256,
-    "train_frequency": 1, "exploration_noise": 0.1, "exploration_noise_final": 0.0,
-    "design_exploration": 0.1, "design_exploration_final": 0.0, "design_exploration_episodes": 0.25,
+    "network": "set",
+    "hidden_sizes": [256, 256],
+    "actor_lr": 1e-3,
+    "critic_lr": 1e-3,
+    "batch_size": 256,
+    "train_frequency": 1,
+    "exploration_noise": 0.1,
+    "exploration_noise_final": 0.0,
+    "design_exploration": 0.1,
+    "design_exploration_final": 0.0,
+    "design_exploration_episodes": 0.25,
     "device": "cpu",
 }
-_HOLD_REWARD = {**_NO_EARLY_EXIT, "no_progress_penalty_in_tolerance": False, "settle_bonus": 5.0,
-                "settle_rate_scale_rad_s": 0.05}
+_HOLD_REWARD = {
+    **_NO_EARLY_EXIT,
+    "no_progress_penalty_in_tolerance": False,
+    "settle_bonus": 5.0,
+    "settle_rate_scale_rad_s": 0.05,
+}
 
 
 def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
-    return JobSpec.model_validate({
-        "name": f"{'paper' if algorithm == 'td3-codesign' else 'ga'}-{n}x{n}x{n}",
-        "algorithm": algorithm,
-        "design": {"grid_size": n},
-        # The paper's plant: torque applied directly, no wheel momentum state.
-        "modules": {"torque_scale_Nm": tau, "actuator_model": "ideal-torque"},
-        "training": _PAPER_TRAINING,
-        "ga": {"population_size": 12, "steps_per_design": 50_000},
-    })
+    return JobSpec.model_validate(
+        {
+            "name": f"{'paper' if algorithm == 'td3-codesign' else 'ga'}-{n}x{n}x{n}",
+            "algorithm": algorithm,
+            "design": {"grid_size": n},
+            # The paper's plant: torque applied directly, no wheel momentum state.
+            "modules": {"torque_scale_Nm": tau, "actuator_model": "ideal-torque"},
+            "training": _PAPER_TRAINING,
+            "ga": {"population_size": 12, "steps_per_design": 50_000},
+        }
+    )
 
 
 PRESETS: dict[str, JobSpec] = {
@@ -67,34 +81,53 @@ PRESETS: dict[str, JobSpec] = {
     # The demo mission: short episodes (120 steps), 30-90 deg slews, 1 deg. 60k env steps: at 30k
     # co-design pointed but did not hold (0 %, e22); at 50-55k it landed 94 % / 81 % of the curve's
     # slews (e26, docs/learning.md). Aimed at 10 minutes on one core; it takes longer (docs/benchmarks.md).
-    "quick": JobSpec.model_validate({
-        "name": "quick",
-        "algorithm": "td3-codesign",
-        # Repair: every grown design flies (docs/learning.md: invalid designs starved short runs).
-        "design": {"grid_size": 3, "repair": True},
-        "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
-        "mission": {"episode_steps": 120, "slew_min_deg": 30.0, "slew_max_deg": 90.0, "tolerance_deg": 1.0,
-                    "reward": _HOLD_REWARD},
-        "training": {
-            **_CPU_TRAINING, "total_env_steps": 60_000, "num_envs": 16, "buffer_size": 100_000,
-            "learning_starts": 2_000, "eval_every_steps": 5_000, "eval_episodes": 16,
-            "checkpoint_every_steps": 10_000,
-        },
-        "evaluation": {"episodes": 32},
-    }),
+    "quick": JobSpec.model_validate(
+        {
+            "name": "quick",
+            "algorithm": "td3-codesign",
+            # Repair: every grown design flies (docs/learning.md: invalid designs starved short runs).
+            "design": {"grid_size": 3, "repair": True},
+            "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
+            "mission": {
+                "episode_steps": 120,
+                "slew_min_deg": 30.0,
+                "slew_max_deg": 90.0,
+                "tolerance_deg": 1.0,
+                "reward": _HOLD_REWARD,
+            },
+            "training": {
+                **_CPU_TRAINING,
+                "total_env_steps": 60_000,
+                "num_envs": 16,
+                "buffer_size": 100_000,
+                "learning_starts": 2_000,
+                "eval_every_steps": 5_000,
+                "eval_episodes": 16,
+                "checkpoint_every_steps": 10_000,
+            },
+            "evaluation": {"episodes": 32},
+        }
+    ),
     # The paper's 3x3x3 mission (500 steps, 30-150 deg, 0.25 deg) for a 2-core CPU.
-    "cpu-3x3x3": JobSpec.model_validate({
-        "name": "cpu-3x3x3",
-        "algorithm": "td3-codesign",
-        "design": {"grid_size": 3, "repair": True},
-        "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
-        "mission": {"reward": _HOLD_REWARD},
-        "training": {
-            **_CPU_TRAINING, "total_env_steps": 100_000, "num_envs": 16, "buffer_size": 200_000,
-            "learning_starts": 5_000, "eval_every_steps": 10_000, "eval_episodes": 16,
-            "checkpoint_every_steps": 20_000,
-        },
-    }),
+    "cpu-3x3x3": JobSpec.model_validate(
+        {
+            "name": "cpu-3x3x3",
+            "algorithm": "td3-codesign",
+            "design": {"grid_size": 3, "repair": True},
+            "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
+            "mission": {"reward": _HOLD_REWARD},
+            "training": {
+                **_CPU_TRAINING,
+                "total_env_steps": 100_000,
+                "num_envs": 16,
+                "buffer_size": 200_000,
+                "learning_starts": 5_000,
+                "eval_every_steps": 10_000,
+                "eval_episodes": 16,
+                "checkpoint_every_steps": 20_000,
+            },
+        }
+    ),
 }
 
 

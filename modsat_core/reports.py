@@ -31,22 +31,46 @@ def curve_seed(spec: JobSpec) -> int:
     return (spec.evaluation.seed + 7919) % (2**31)
 
 
-def evaluate_design(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, *, episodes: int, seed: int,
-                    record: int = 0, dtype=torch.float32, device: str = "cpu"):
+def evaluate_design(
+    actor: torch.nn.Module,
+    grid: np.ndarray,
+    spec: JobSpec,
+    *,
+    episodes: int,
+    seed: int,
+    record: int = 0,
+    dtype=torch.float32,
+    device: str = "cpu",
+):
     """Monte-Carlo of the actor flying ``grid``; None if the grid is not a valid satellite."""
     if not is_valid(grid):
         return None
-    return monte_carlo(Design.from_grid(grid, spec.modules), PolicyController(actor, grid, spec), spec.mission,
-                       spec.modules, episodes=episodes, seed=seed, record=record, dtype=dtype, device=device)
+    return monte_carlo(
+        Design.from_grid(grid, spec.modules),
+        PolicyController(actor, grid, spec),
+        spec.mission,
+        spec.modules,
+        episodes=episodes,
+        seed=seed,
+        record=record,
+        dtype=dtype,
+        device=device,
+    )
 
 
-def curve_point(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, env_steps: int, updates: int,
-                penalty: float) -> dict:
+def curve_point(
+    actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, env_steps: int, updates: int, penalty: float
+) -> dict:
     mc = evaluate_design(actor, grid, spec, episodes=spec.training.eval_episodes, seed=curve_seed(spec))
     n_mod = int((np.asarray(grid) != EMPTY).sum())
     n_act = int((np.asarray(grid) == ACTUATOR).sum())
-    point: dict[str, Any] = {"env_steps": env_steps, "updates": updates, "valid": mc is not None,
-                             "modules": n_mod, "actuators": n_act}
+    point: dict[str, Any] = {
+        "env_steps": env_steps,
+        "updates": updates,
+        "valid": mc is not None,
+        "modules": n_mod,
+        "actuators": n_act,
+    }
     # Success at the mission's tolerance and at the reported ones (0.25 and 1 deg), so that a
     # curve shows how close to the paper's 0.25 deg a run that lands at 1 deg is.
     tol_keys = [f"success_rate_at_{t:g}_deg" for t in REPORT_TOLERANCES_DEG]
@@ -54,8 +78,12 @@ def curve_point(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, env_ste
         point.update({"mean_return": penalty, "success_rate": 0.0, **dict.fromkeys(tol_keys, 0.0)})
     else:
         s = mc.summary(REPORT_TOLERANCES_DEG)
-        point.update({k: s[k] for k in ("mean_return", "success_rate", *tol_keys, "median_final_error_deg",
-                                        "median_slew_time_ratio")})
+        point.update(
+            {
+                k: s[k]
+                for k in ("mean_return", "success_rate", *tol_keys, "median_final_error_deg", "median_slew_time_ratio")
+            }
+        )
     return CurvePoint.model_validate(point).to_dict()
 
 
@@ -65,9 +93,13 @@ def design_report(grid: np.ndarray, spec: JobSpec) -> DesignReport:
     if not (grid != EMPTY).any():
         return DesignReport.of(grid)
     mp = mass_properties(grid, spec.modules.module_mass_kg, spec.modules.module_size_m)
-    return DesignReport.of(grid, mass_kg=float(mp.mass_kg), com_grid_m=np.asarray(mp.com_grid_m).tolist(),
-                           inertia_kgm2=np.asarray(mp.inertia_B_kgm2).tolist(),
-                           principal_inertia_kgm2=np.linalg.eigvalsh(mp.inertia_B_kgm2).tolist())
+    return DesignReport.of(
+        grid,
+        mass_kg=float(mp.mass_kg),
+        com_grid_m=np.asarray(mp.com_grid_m).tolist(),
+        inertia_kgm2=np.asarray(mp.inertia_B_kgm2).tolist(),
+        principal_inertia_kgm2=np.linalg.eigvalsh(mp.inertia_B_kgm2).tolist(),
+    )
 
 
 def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: int | None = None) -> dict:
@@ -78,8 +110,10 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     out: dict[str, Any] = {"episodes": n, "seed": ev.seed, "design_valid": bool(is_valid(grid))}
     if not out["design_valid"]:
         pen = effective_invalid_penalty(spec)
-        out["policy"] = {"summary": {"episodes": n, "success_rate": 0.0, "mean_return": pen, "std_return": 0.0},
-                         "episodes": []}
+        out["policy"] = {
+            "summary": {"episodes": n, "success_rate": 0.0, "mean_return": pen, "std_return": 0.0},
+            "episodes": [],
+        }
         out["pd_baseline"] = None
         out["trajectories"] = {"policy": [], "pd_baseline": []}
         return out
@@ -123,8 +157,9 @@ def curve_png(curve: list[dict], title: str) -> bytes:
     return buf.getvalue()
 
 
-def run_files(spec: JobSpec, curve: list[dict], actor: torch.nn.Module, grid: np.ndarray, extra: dict | None = None
-              ) -> tuple[dict[str, bytes], dict]:
+def run_files(
+    spec: JobSpec, curve: list[dict], actor: torch.nn.Module, grid: np.ndarray, extra: dict | None = None
+) -> tuple[dict[str, bytes], dict]:
     """All output files of a finished run, and a short summary of its evaluation."""
 
     raw = final_evaluation(actor, grid, spec)
@@ -134,8 +169,9 @@ def run_files(spec: JobSpec, curve: list[dict], actor: torch.nn.Module, grid: np
     title = f"{spec.name or spec.algorithm}: {spec.design.grid_size}^3, seed {spec.seed}"
     files = {
         "spec.json": spec.model_dump_json(indent=2).encode(),
-        "curve.json": CurveFile.model_validate({"algorithm": spec.algorithm, "points": curve, **(extra or {})}
-                                               ).to_json(indent=1),
+        "curve.json": CurveFile.model_validate({"algorithm": spec.algorithm, "points": curve, **(extra or {})}).to_json(
+            indent=1
+        ),
         "curve.png": curve_png(curve, title),
         "design.json": design.to_json(indent=1),
         "evaluation.json": ev.to_json(indent=1),
@@ -144,6 +180,9 @@ def run_files(spec: JobSpec, curve: list[dict], actor: torch.nn.Module, grid: np
     }
     if ev.design_valid:
         files["policy_export.pt"] = export_torchscript(actor, grid, spec)
-    summary = RunSummary(policy=ev.policy.summary, pd_baseline=ev.pd_baseline.summary if ev.pd_baseline else None,
-                         design=design.figures())
+    summary = RunSummary(
+        policy=ev.policy.summary,
+        pd_baseline=ev.pd_baseline.summary if ev.pd_baseline else None,
+        design=design.figures(),
+    )
     return files, summary.to_dict()

@@ -47,8 +47,15 @@ class Metrics:
     @classmethod
     def zeros(cls, B: int, dtype: torch.dtype, device: torch.device) -> Metrics:
         z = torch.zeros(B, dtype=dtype, device=device)
-        return cls(z.clone(), z.clone(), z.clone(), torch.zeros(B, dtype=torch.bool, device=device),
-                   z.clone(), z.clone(), z.clone())
+        return cls(
+            z.clone(),
+            z.clone(),
+            z.clone(),
+            torch.zeros(B, dtype=torch.bool, device=device),
+            z.clone(),
+            z.clone(),
+            z.clone(),
+        )
 
     def reset(self, idx: Tensor) -> None:
         for name in ("ret", "effort_Nms", "peak_rate_rad_s", "last_out_of_tol_s"):
@@ -71,12 +78,16 @@ class Design:
     @classmethod
     def from_grid(cls, grid, modules: ModuleCatalog) -> Design:
         mp = mass_properties(grid, modules.module_mass_kg, modules.module_size_m)
-        return cls(grid=np.asarray(grid, dtype=np.int8), I_B=mp.inertia_B_kgm2,
-                   actuator_positions_B_m=mp.positions_B_m[mp.types == ACTUATOR])
+        return cls(
+            grid=np.asarray(grid, dtype=np.int8),
+            I_B=mp.inertia_B_kgm2,
+            actuator_positions_B_m=mp.positions_B_m[mp.types == ACTUATOR],
+        )
 
 
-def episode_metrics(m: Metrics, phi_rad: Tensor, omega_norm: Tensor, t_s: Tensor, mission: Mission
-                    ) -> dict[str, Tensor]:
+def episode_metrics(
+    m: Metrics, phi_rad: Tensor, omega_norm: Tensor, t_s: Tensor, mission: Mission
+) -> dict[str, Tensor]:
     """Summary of finished episodes (all tensors (B,)); see DESIGN.md, "Metrics"."""
     tol = mission.tolerance_deg * quat.DEG
     settled_now = (phi_rad <= tol) & (omega_norm <= mission.rate_tolerance_rad_s)

@@ -50,8 +50,16 @@ def spec_markdown() -> str:
     ]
 
     def table(title: str, node: dict) -> None:
-        lines.extend([f"## `{title}`", "", node.get("description", "").strip(), "",
-                      "| field | type | default | allowed | meaning |", "|---|---|---|---|---|"])
+        lines.extend(
+            [
+                f"## `{title}`",
+                "",
+                node.get("description", "").strip(),
+                "",
+                "| field | type | default | allowed | meaning |",
+                "|---|---|---|---|---|",
+            ]
+        )
         for name, prop in node["properties"].items():
             default = prop.get("default", "")
             default = json.dumps(default) if default != "" else "(section)"
@@ -62,10 +70,18 @@ def spec_markdown() -> str:
     table("JobSpec", schema)
     for name in ("DesignSpace", "ModuleCatalog", "Mission", "RewardSpec", "Training", "GA", "Evaluation"):
         table(name, defs[name])
-    lines.extend(["## Presets", "", "| name | algorithm | grid | env steps | actuator model | torque scale (N m) |",
-                  "|---|---|---|---|---|---|"])
+    lines.extend(
+        [
+            "## Presets",
+            "",
+            "| name | algorithm | grid | env steps | actuator model | torque scale (N m) |",
+            "|---|---|---|---|---|---|",
+        ]
+    )
     for name, spec in PRESETS.items():
         n = spec.design.grid_size
-        lines.append(f"| `{name}` | {spec.algorithm} | {n}x{n}x{n} | {spec.training.total_env_steps:,} | "
-                     f"{spec.modules.actuator_model} | {spec.modules.torque_scale_Nm} |")
+        lines.append(
+            f"| `{name}` | {spec.algorithm} | {n}x{n}x{n} | {spec.training.total_env_steps:,} | "
+            f"{spec.modules.actuator_model} | {spec.modules.torque_scale_Nm} |"
+        )
     return "\n".join(lines) + "\n"

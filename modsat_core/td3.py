@@ -32,8 +32,15 @@ class TD3Config:
     @classmethod
     def from_training(cls, t) -> TD3Config:
         """The update's settings of a spec's ``training`` section (the one place they are read)."""
-        return cls(gamma=t.gamma, tau=t.tau, policy_noise=t.policy_noise, noise_clip=t.noise_clip,
-                   policy_delay=t.policy_delay, actor_lr=t.actor_lr, critic_lr=t.critic_lr)
+        return cls(
+            gamma=t.gamma,
+            tau=t.tau,
+            policy_noise=t.policy_noise,
+            noise_clip=t.noise_clip,
+            policy_delay=t.policy_delay,
+            actor_lr=t.actor_lr,
+            critic_lr=t.critic_lr,
+        )
 
 
 class TD3:
@@ -49,9 +56,17 @@ class TD3:
         self.critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr)
         self.updates = 0
 
-    def update(self, obs, action: Tensor, reward: Tensor, next_obs, terminal: Tensor,
-               generator: torch.Generator, discount: Tensor | None = None,
-               actor_rows: Tensor | None = None) -> dict[str, float]:
+    def update(
+        self,
+        obs,
+        action: Tensor,
+        reward: Tensor,
+        next_obs,
+        terminal: Tensor,
+        generator: torch.Generator,
+        discount: Tensor | None = None,
+        actor_rows: Tensor | None = None,
+    ) -> dict[str, float]:
         """One TD3 step on a batch; the actor and targets move every ``policy_delay`` calls.
 
         ``discount``: per-row factor of the bootstrapped value (``gamma ** m`` for an m-step
@@ -64,7 +79,8 @@ class TD3:
             noise = torch.randn(next_a.shape, generator=generator, device=next_a.device) * cfg.policy_noise
             # finish: a static method of each actor class; typed nn.Module, mypy sees __getattr__'s Tensor | Module.
             next_a = self.actor_target.finish(  # type: ignore[operator]
-                next_obs, next_a + noise.clamp(-cfg.noise_clip, cfg.noise_clip))
+                next_obs, next_a + noise.clamp(-cfg.noise_clip, cfg.noise_clip)
+            )
             q1_t, q2_t = self.critic_target(next_obs, next_a)
             gamma = cfg.gamma if discount is None else discount
             y = reward + gamma * (1.0 - terminal.to(reward.dtype)) * torch.minimum(q1_t, q2_t)
@@ -99,9 +115,12 @@ class TD3:
 
     def state_dict(self) -> dict:
         return {
-            "actor": self.actor.state_dict(), "critic": self.critic.state_dict(),
-            "actor_target": self.actor_target.state_dict(), "critic_target": self.critic_target.state_dict(),
-            "actor_opt": self.actor_opt.state_dict(), "critic_opt": self.critic_opt.state_dict(),
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "actor_target": self.actor_target.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "actor_opt": self.actor_opt.state_dict(),
+            "critic_opt": self.critic_opt.state_dict(),
             "updates": self.updates,
         }
 
@@ -147,8 +166,9 @@ class ReplayBuffer:
         idx = torch.randint(0, self.size, (n,), generator=generator)
         return {k: t[idx] for k, t in self.data.items()}
 
-    def sample_n_step(self, n: int, steps: int, rows_per_step: int, gamma: float,
-                      generator: torch.Generator) -> tuple[dict[str, Tensor], Tensor]:
+    def sample_n_step(
+        self, n: int, steps: int, rows_per_step: int, gamma: float, generator: torch.Generator
+    ) -> tuple[dict[str, Tensor], Tensor]:
         """A batch of ``steps``-step transitions, and each one's bootstrap discount.
 
         The buffer must be filled ``rows_per_step`` rows at a time, one per parallel episode in

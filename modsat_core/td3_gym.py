@@ -66,9 +66,16 @@ def train_gym(
     act_dim = act_space.shape[0]
     scale = act_space.high.astype(np.float32)
     agent = TD3(MLPActor(obs_dim, act_dim, list(hidden)), MLPCritic(obs_dim, act_dim, list(hidden)), cfg)
-    buf = ReplayBuffer({"obs": ((obs_dim,), torch.float32), "act": ((act_dim,), torch.float32),
-                        "rew": ((), torch.float32), "next_obs": ((obs_dim,), torch.float32),
-                        "term": ((), torch.bool)}, capacity=total_steps)
+    buf = ReplayBuffer(
+        {
+            "obs": ((obs_dim,), torch.float32),
+            "act": ((act_dim,), torch.float32),
+            "rew": ((), torch.float32),
+            "next_obs": ((obs_dim,), torch.float32),
+            "term": ((), torch.bool),
+        },
+        capacity=total_steps,
+    )
     obs, _ = env.reset(seed=seed)
     curve = []
     for step in range(1, total_steps + 1):
@@ -79,9 +86,15 @@ def train_gym(
                 a = agent.actor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
             a = np.clip(a + rng.normal(0.0, exploration_noise, size=act_dim), -1.0, 1.0).astype(np.float32)
         next_obs, r, term, trunc, _ = env.step(a * scale)
-        buf.add({"obs": torch.as_tensor(obs)[None], "act": torch.as_tensor(a)[None],
-                 "rew": torch.tensor([r], dtype=torch.float32), "next_obs": torch.as_tensor(next_obs)[None],
-                 "term": torch.tensor([term])})
+        buf.add(
+            {
+                "obs": torch.as_tensor(obs)[None],
+                "act": torch.as_tensor(a)[None],
+                "rew": torch.tensor([r], dtype=torch.float32),
+                "next_obs": torch.as_tensor(next_obs)[None],
+                "term": torch.tensor([term]),
+            }
+        )
         obs = next_obs
         if term or trunc:
             obs, _ = env.reset()

@@ -75,7 +75,7 @@ class TD3Run:
         p_swap = self.t.design_exploration_at(self.env_steps)
         if bool(obs.design.any()) and p_swap > 0:
             # Design exploration: a cell's type is replaced by a random one.
-            swap = (torch.rand((B, C, 1), generator=self.gen, device=self.device) < p_swap)
+            swap = torch.rand((B, C, 1), generator=self.gen, device=self.device) < p_swap
             swap &= (obs.design & explore).reshape(B, 1, 1)
             rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
             a = torch.where(swap, rand, a)
@@ -115,8 +115,9 @@ class TD3Run:
         return self.agent.actor if self.device == "cpu" else self._cpu_actor()
 
     # ------------------------------------------------------------------ loop
-    def run(self, on_progress: ProgressFn, on_checkpoint: CheckpointFn, should_stop: StopFn,
-            budget: int | None = None) -> bool:
+    def run(
+        self, on_progress: ProgressFn, on_checkpoint: CheckpointFn, should_stop: StopFn, budget: int | None = None
+    ) -> bool:
         """Train until the budget is spent; returns True if ``should_stop`` ended it early."""
         total = self.t.total_env_steps if budget is None else budget
         B = self.env.B
@@ -132,8 +133,16 @@ class TD3Run:
             obs = observe_compact(obs_c, N, D, rl)
             action = self._act(obs)
             st = self.env.step(action)
-            self.buffer.add({**obs_c.as_dict("obs_"), **st.next_state.as_dict("next_"), "action": action,
-                             "reward": st.reward, "terminal": st.terminal, "done": st.done})
+            self.buffer.add(
+                {
+                    **obs_c.as_dict("obs_"),
+                    **st.next_state.as_dict("next_"),
+                    "action": action,
+                    "reward": st.reward,
+                    "terminal": st.terminal,
+                    "done": st.done,
+                }
+            )
             self.recent.extend(st.finished)
             self.env_steps += B
             if self.env_steps >= self.t.learning_starts and self.buffer.size >= self.t.batch_size:
@@ -159,8 +168,9 @@ class TD3Run:
     def _update(self) -> None:
         discount = None
         if self.t.n_step > 1:
-            b, discount = self.buffer.sample_n_step(self.t.batch_size, self.t.n_step, self.env.B, self.t.gamma,
-                                                    self.gen)
+            b, discount = self.buffer.sample_n_step(
+                self.t.batch_size, self.t.n_step, self.env.B, self.t.gamma, self.gen
+            )
         else:
             b = self.buffer.sample(self.t.batch_size, self.gen)
         N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
@@ -173,8 +183,7 @@ class TD3Run:
         # Until design_learning_starts the design layers are held: the controller learns to fly
         # the design the policy starts from (and the explored ones near it) before it moves.
         actor_rows = ~obs.design if self.env_steps < self.t.design_learning_starts else None
-        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount,
-                                           actor_rows)
+        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount, actor_rows)
 
     def evaluate_now(self) -> dict:
         actor = self._eval_actor()
@@ -182,15 +191,24 @@ class TD3Run:
         point = curve_point(actor, grid, self.spec, self.env_steps, self.agent.updates, self.env.penalty)
         self.curve.append(point)
         if self.best is None or _rank(point) > _rank(self.best):
-            self.best = {"mean_return": point["mean_return"], "success_rate": point["success_rate"],
-                         "env_steps": self.env_steps, "grid": grid,
-                         "actor": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()}}
+            self.best = {
+                "mean_return": point["mean_return"],
+                "success_rate": point["success_rate"],
+                "env_steps": self.env_steps,
+                "grid": grid,
+                "actor": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()},
+            }
         return point
 
     def progress(self, total: int, point: dict | None) -> dict:
         recent, self.recent = self.recent, []
-        out = {"env_steps": self.env_steps, "total_env_steps": total, "updates": self.agent.updates,
-               "phase": "training", "eval": point}
+        out = {
+            "env_steps": self.env_steps,
+            "total_env_steps": total,
+            "updates": self.agent.updates,
+            "phase": "training",
+            "eval": point,
+        }
         if recent:
             out["train_episodes"] = len(recent)
             out["train_mean_return"] = float(np.mean([r["return"] for r in recent]))
@@ -211,11 +229,18 @@ class TD3Run:
     def state_dict(self) -> dict:
         keep_buffer = self.buffer.size * (self.buffer.nbytes / self.buffer.capacity) <= CHECKPOINT_BUFFER_LIMIT_BYTES
         return {
-            "env_steps": self.env_steps, "update_credit": self.update_credit, "next_eval": self.next_eval,
-            "next_ckpt": self.next_ckpt, "curve": copy.deepcopy(self.curve), "best": self.best,
-            "agent": to_cpu(self.agent.state_dict()), "env": to_cpu(self.env.state_dict()),
+            "env_steps": self.env_steps,
+            "update_credit": self.update_credit,
+            "next_eval": self.next_eval,
+            "next_ckpt": self.next_ckpt,
+            "curve": copy.deepcopy(self.curve),
+            "best": self.best,
+            "agent": to_cpu(self.agent.state_dict()),
+            "env": to_cpu(self.env.state_dict()),
             "buffer": to_cpu(self.buffer.state_dict()) if keep_buffer else None,
-            "gen": self.gen.get_state(), "cpu_gen": self.cpu_gen.get_state(), "rng": self.rng.bit_generator.state,
+            "gen": self.gen.get_state(),
+            "cpu_gen": self.cpu_gen.get_state(),
+            "rng": self.rng.bit_generator.state,
             "explore_design": self.explore_design.cpu().clone(),
         }
 

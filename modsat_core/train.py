@@ -54,21 +54,30 @@ def train(
         raise ValueError("checkpoint from an incompatible modsat version")
     if spec.algorithm == "ga":
         return GARun(spec, device=resolve_device(spec.training.device)).train(
-            on_progress, on_checkpoint, should_stop, checkpoint)
+            on_progress, on_checkpoint, should_stop, checkpoint
+        )
     device = resolve_device(spec.training.device)
     run = TD3Run(spec, device=device)
     if checkpoint is not None:
         run.load_state_dict(to_device(checkpoint["run"], device))
 
     def wrap(state: dict) -> None:
-        on_checkpoint({"version": CHECKPOINT_VERSION, "algorithm": spec.algorithm, "env_steps": state["env_steps"],
-                       "run": state})
+        on_checkpoint(
+            {"version": CHECKPOINT_VERSION, "algorithm": spec.algorithm, "env_steps": state["env_steps"], "run": state}
+        )
 
     stopped = run.run(on_progress, wrap, should_stop)
     if stopped:
         return RunResult(stopped=True, env_steps=run.env_steps, curve=run.curve)
-    on_progress(ProgressRecord(env_steps=run.env_steps, total_env_steps=spec.training.total_env_steps,
-                               updates=run.agent.updates, phase="evaluating", eval=None).to_dict())
+    on_progress(
+        ProgressRecord(
+            env_steps=run.env_steps,
+            total_env_steps=spec.training.total_env_steps,
+            updates=run.agent.updates,
+            phase="evaluating",
+            eval=None,
+        ).to_dict()
+    )
     actor, grid = run.best_actor()
     assert run.best is not None  # best_actor() needs it too
     files, summary = run_files(spec, run.curve, actor, grid, {"best_env_steps": run.best["env_steps"]})

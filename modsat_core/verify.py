@@ -59,8 +59,15 @@ from .verify_flight import (
     summarize,
 )
 
-__all__ = ["BASILISK_MISSING", "DEFAULT_WHEEL_INERTIA_KGM2", "WheelOptions", "add_verification", "basilisk_available",
-           "format_report", "verify_run"]
+__all__ = [
+    "BASILISK_MISSING",
+    "DEFAULT_WHEEL_INERTIA_KGM2",
+    "WheelOptions",
+    "add_verification",
+    "basilisk_available",
+    "format_report",
+    "verify_run",
+]
 
 
 # ----------------------------------------------------------------------------- the run
@@ -86,8 +93,12 @@ def load_run(run_dir: str) -> Run:
         raise ValueError(f"the design in {run_dir}/design.json is not a valid satellite: nothing to fly")
     path = os.path.join(run_dir, "policy_export.pt")
     if not os.path.exists(path):
-        return Run(spec, grid, None, f"no policy_export.pt in {run_dir} (a GA run or an older run): "
-                                     "only the PD baseline is verified")
+        return Run(
+            spec,
+            grid,
+            None,
+            f"no policy_export.pt in {run_dir} (a GA run or an older run): only the PD baseline is verified",
+        )
     with warnings.catch_warnings():  # TorchScript's deprecation notice (see policy.export_torchscript)
         warnings.simplefilter("ignore", DeprecationWarning)
         policy = torch.jit.load(path, map_location="cpu")
@@ -108,8 +119,10 @@ class ExportedPolicy:
         # One row at a time: a float32 network's output can depend on the batch size in the
         # last bit, and Basilisk flies one satellite at a time.
         with torch.no_grad():
-            rows = [self.module(sim.error_quaternion()[i:i + 1], sim.state.omega_B[i:i + 1],
-                                sim.state.h_B[i:i + 1]) for i in range(sim.B)]
+            rows = [
+                self.module(sim.error_quaternion()[i : i + 1], sim.state.omega_B[i : i + 1], sim.state.h_B[i : i + 1])
+                for i in range(sim.B)
+            ]
         return torch.cat(rows).to(sim.dtype) / self.tau_max
 
 
@@ -124,8 +137,9 @@ def pd_factory(sim: SlewSim) -> PDController:
 # ----------------------------------------------------------------------------- report
 
 
-def compare(spec: JobSpec, grid: np.ndarray, draws: list[EpisodeDraw], factory: ControllerFactory,
-            wheels: WheelOptions) -> dict:
+def compare(
+    spec: JobSpec, grid: np.ndarray, draws: list[EpisodeDraw], factory: ControllerFactory, wheels: WheelOptions
+) -> dict:
     """One controller on the same slews in both simulators, side by side."""
     design = Design.from_grid(grid, spec.modules)
     ours = fly_modsat(design, spec, draws, factory)
@@ -140,8 +154,10 @@ def compare(spec: JobSpec, grid: np.ndarray, draws: list[EpisodeDraw], factory: 
         "max_attitude_difference_rad": max(diffs),
         "median_attitude_difference_rad": float(np.median(diffs)),
         "same_success": [a["success"] for a in rows_m] == [b["success"] for b in rows_b],
-        "slews": [{"episode": i, "attitude_difference_rad": d, "modsat": a, "basilisk": b}
-                  for i, (d, a, b) in enumerate(zip(diffs, rows_m, rows_b))],
+        "slews": [
+            {"episode": i, "attitude_difference_rad": d, "modsat": a, "basilisk": b}
+            for i, (d, a, b) in enumerate(zip(diffs, rows_m, rows_b))
+        ],
     }
 
 
@@ -170,8 +186,9 @@ def plant_report(spec: JobSpec, grid: np.ndarray, wheels: WheelOptions) -> dict:
         "wheel_units": n_units,
         "wheels": 3 * n_units if has_wheels else 0,
         "wheel_model": "BalancedWheels" if has_wheels else None,
-        "hub_inertia_kgm2": (np.asarray(mp.inertia_B_kgm2) + (n_units * wheels.inertia_kgm2 if has_wheels else 0.0)
-                             * np.eye(3)).tolist(),
+        "hub_inertia_kgm2": (
+            np.asarray(mp.inertia_B_kgm2) + (n_units * wheels.inertia_kgm2 if has_wheels else 0.0) * np.eye(3)
+        ).tolist(),
         "torque_limit_Nm": mods.torque_scale_Nm,
         "momentum_capacity_Nms": mods.momentum_capacity_Nms,
         "wheel_options": asdict(wheels) if has_wheels else None,
@@ -184,8 +201,12 @@ def plant_report(spec: JobSpec, grid: np.ndarray, wheels: WheelOptions) -> dict:
     }
 
 
-def verify_run(run_dir: str, episodes: int | None = None, wheels: WheelOptions | None = None,
-               log: Callable[[str], None] | None = None) -> dict:
+def verify_run(
+    run_dir: str,
+    episodes: int | None = None,
+    wheels: WheelOptions | None = None,
+    log: Callable[[str], None] | None = None,
+) -> dict:
     """Fly the run's evaluation slews in Basilisk and in modsat; the report ``--json`` prints."""
     wheels = wheels or WheelOptions()
     log = log or (lambda _line: None)
@@ -215,14 +236,16 @@ def verify_run(run_dir: str, episodes: int | None = None, wheels: WheelOptions |
 def format_report(report: dict) -> str:
     """The report as a table for people."""
     p = report["plant"]
-    lines = [f"{report['episodes']} evaluation slews (seed {report['seed']}), modsat SlewSim float64 vs Basilisk "
-             f"{p['basilisk_version']} ({p['integrator']}, dt {p['basilisk_dt_ns']} ns, control every "
-             f"{p['frame_skip']} steps)",
-             f"plant: {p['mass_kg']:g} kg, {p['wheel_units']} wheel unit(s), {p['actuator_model']}, gravity gradient "
-             f"{'on' if p['gravity_gradient'] else 'off'}" + ("" if p["ideal_wheels"] else
-                                                                "; Basilisk wheel limits on: agreement not expected"),
-             f"{'':<12} {'simulator':<9} {'@tol':>6} {'@0.25deg':>8} {'@1deg':>6} {'error deg':>10} "
-             f"{'settle s':>8} {'peak rad/s':>10} {'unsafe':>6}   (success rates; medians; max peak rate)"]
+    lines = [
+        f"{report['episodes']} evaluation slews (seed {report['seed']}), modsat SlewSim float64 vs Basilisk "
+        f"{p['basilisk_version']} ({p['integrator']}, dt {p['basilisk_dt_ns']} ns, control every "
+        f"{p['frame_skip']} steps)",
+        f"plant: {p['mass_kg']:g} kg, {p['wheel_units']} wheel unit(s), {p['actuator_model']}, gravity gradient "
+        f"{'on' if p['gravity_gradient'] else 'off'}"
+        + ("" if p["ideal_wheels"] else "; Basilisk wheel limits on: agreement not expected"),
+        f"{'':<12} {'simulator':<9} {'@tol':>6} {'@0.25deg':>8} {'@1deg':>6} {'error deg':>10} "
+        f"{'settle s':>8} {'peak rad/s':>10} {'unsafe':>6}   (success rates; medians; max peak rate)",
+    ]
     for name, c in report["controllers"].items():
         if not c["available"]:
             lines.append(f"{name:<12} {c['reason']}")
@@ -230,13 +253,17 @@ def format_report(report: dict) -> str:
         for sim in ("modsat", "basilisk"):
             s = c[sim]
             settle = s["median_settling_time_s"]
-            lines.append(f"{name if sim == 'modsat' else '':<12} {sim:<9} {100 * s['success_rate']:>5.0f}% "
-                         f"{100 * s['success_rate_0_25deg']:>7.0f}% {100 * s['success_rate_1deg']:>5.0f}% "
-                         f"{s['median_final_error_deg']:>10.4f} {'-' if settle is None else f'{settle:.3f}':>8} "
-                         f"{s['max_peak_rate_rad_s']:>10.3f} {s['safety_violations']:>6}")
-        lines.append(f"{'':<12} attitude difference modsat vs Basilisk: max {c['max_attitude_difference_rad']:.2e} "
-                     f"rad, median {c['median_attitude_difference_rad']:.2e} rad; same successes: "
-                     f"{'yes' if c['same_success'] else 'NO'}")
+            lines.append(
+                f"{name if sim == 'modsat' else '':<12} {sim:<9} {100 * s['success_rate']:>5.0f}% "
+                f"{100 * s['success_rate_0_25deg']:>7.0f}% {100 * s['success_rate_1deg']:>5.0f}% "
+                f"{s['median_final_error_deg']:>10.4f} {'-' if settle is None else f'{settle:.3f}':>8} "
+                f"{s['max_peak_rate_rad_s']:>10.3f} {s['safety_violations']:>6}"
+            )
+        lines.append(
+            f"{'':<12} attitude difference modsat vs Basilisk: max {c['max_attitude_difference_rad']:.2e} "
+            f"rad, median {c['median_attitude_difference_rad']:.2e} rad; same successes: "
+            f"{'yes' if c['same_success'] else 'NO'}"
+        )
     return "\n".join(lines)
 
 

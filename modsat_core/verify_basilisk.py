@@ -27,6 +27,8 @@ BASILISK_MISSING = "modsat verify --basilisk needs Basilisk: pip install -e '.[b
 DEFAULT_WHEEL_INERTIA_KGM2 = 0.01
 #: Wheel units per Basilisk wheel effector: its motor-torque message holds 36 wheels.
 UNITS_PER_EFFECTOR = 12
+
+
 def basilisk_available() -> bool:
     """Whether the Basilisk modules this verification uses can be imported."""
     try:
@@ -175,10 +177,15 @@ class BasiliskSatellite:
             factory = simIncludeRW.rwFactory()
             for k in range(g0, min(g0 + per, self.K)):
                 for axis in range(3):
-                    kw = dict(RWModel=messaging.BalancedWheels, Js=float(self.Js), u_max=float(mods.torque_scale_Nm),
-                              rWB_B=[float(x) for x in self.unit_positions[k]],
-                              # Zero absolute wheel momentum at the start: Omega = -g . w.
-                              Omega=float(-draw.omega_B[axis] / macros.RPM), label=f"{'xyz'[axis]}{k - g0}")
+                    kw = dict(
+                        RWModel=messaging.BalancedWheels,
+                        Js=float(self.Js),
+                        u_max=float(mods.torque_scale_Nm),
+                        rWB_B=[float(x) for x in self.unit_positions[k]],
+                        # Zero absolute wheel momentum at the start: Omega = -g . w.
+                        Omega=float(-draw.omega_B[axis] / macros.RPM),
+                        label=f"{'xyz'[axis]}{k - g0}",
+                    )
                     if opt.coulomb_friction_Nm > 0:
                         kw.update(useRWfriction=True, fCoulomb=float(opt.coulomb_friction_Nm))
                     if opt.viscous_friction_Nms > 0:
@@ -211,7 +218,7 @@ class BasiliskSatellite:
             u = -np.asarray(tau_cmd_B, dtype=float)  # the motors' torque on the wheels; Basilisk clips to u_max
             per = UNITS_PER_EFFECTOR
             for g, (_, msg, payload, _) in enumerate(self.rw_groups):
-                cmd = u[g * per:(g + 1) * per].reshape(-1)
+                cmd = u[g * per : (g + 1) * per].reshape(-1)
                 payload.motorTorque = cmd.tolist() + [0.0] * (36 - len(cmd))
                 msg.write(payload, self.t_ns)
         else:
@@ -258,8 +265,9 @@ def circular_orbit(altitude_km: float, phase_rad: float) -> tuple[np.ndarray, np
     return np.array([r * c, r * s, 0.0]), np.array([-v * s, v * c, 0.0])
 
 
-def fly_basilisk(spec: JobSpec, grid: np.ndarray, draw: EpisodeDraw, factory: ControllerFactory,
-                 wheels: WheelOptions) -> Flight:
+def fly_basilisk(
+    spec: JobSpec, grid: np.ndarray, draw: EpisodeDraw, factory: ControllerFactory, wheels: WheelOptions
+) -> Flight:
     """One slew in Basilisk, the controller called at the control rate from the loop.
 
     The controller sees the Basilisk state through a one-satellite SlewSim that only holds
@@ -272,9 +280,12 @@ def fly_basilisk(spec: JobSpec, grid: np.ndarray, draw: EpisodeDraw, factory: Co
     controller = factory(mirror)
     t, q, w = [0.0], [sat.q_BN.copy()], [sat.omega_B.copy()]
     for _ in range(m.episode_steps):
-        mirror.state = dyn.State(q_BN=torch.from_numpy(sat.q_BN).unsqueeze(0),
-                                 omega_B=torch.from_numpy(sat.omega_B).unsqueeze(0),
-                                 h_B=torch.from_numpy(sat.h_B).unsqueeze(0), t_s=torch.tensor([sat.t_s]))
+        mirror.state = dyn.State(
+            q_BN=torch.from_numpy(sat.q_BN).unsqueeze(0),
+            omega_B=torch.from_numpy(sat.omega_B).unsqueeze(0),
+            h_B=torch.from_numpy(sat.h_B).unsqueeze(0),
+            t_s=torch.tensor([sat.t_s]),
+        )
         with torch.no_grad():
             tau_cmd = commanded_torque(controller(mirror), mirror)[0].numpy()
         sat.step(tau_cmd)

@@ -21,7 +21,6 @@ from .spec import JobSpec
 ControllerFactory = Callable[[SlewSim], Callable[[SlewSim], torch.Tensor]]
 
 
-
 def evaluation_draws(spec: JobSpec, episodes: int) -> list[EpisodeDraw]:
     """The slews of modsat's final Monte-Carlo evaluation (same seed, same order)."""
     return [draw_episode(r, spec.mission) for r in episode_rngs(spec.evaluation.seed, episodes)]
@@ -116,13 +115,15 @@ def summarize(rows: list[dict]) -> dict:
     for tol_deg in REPORT_TOLERANCES_DEG:
         key = _tol_key(tol_deg)
         out[f"success_rate_{key}"] = sum(r[f"success_{key}"] for r in rows) / n
-    out.update({
-        "median_final_error_deg": median("final_error_deg"),
-        "max_final_error_deg": max(r["final_error_deg"] for r in rows),
-        "median_settling_time_s": median("settling_time_s"),
-        "max_peak_rate_rad_s": max(r["peak_rate_rad_s"] for r in rows),
-        "safety_violations": sum(r["safety_violation"] for r in rows),
-    })
+    out.update(
+        {
+            "median_final_error_deg": median("final_error_deg"),
+            "max_final_error_deg": max(r["final_error_deg"] for r in rows),
+            "median_settling_time_s": median("settling_time_s"),
+            "max_peak_rate_rad_s": max(r["peak_rate_rad_s"] for r in rows),
+            "safety_violations": sum(r["safety_violation"] for r in rows),
+        }
+    )
     return out
 
 

@@ -99,21 +99,28 @@ def _readable(err: dict[str, Any]) -> str:
 def _install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def _validation(_request: Request, exc: RequestValidationError) -> JSONResponse:
-        errors = [{"loc": list(e.get("loc", ())), "msg": _readable(e), "type": str(e.get("type", ""))}
-                  for e in exc.errors()]
+        errors = [
+            {"loc": list(e.get("loc", ())), "msg": _readable(e), "type": str(e.get("type", ""))} for e in exc.errors()
+        ]
         return JSONResponse({"detail": errors, "messages": [e["msg"] for e in errors]}, status_code=422)
 
     @app.exception_handler(OperationalError)
     async def _db_down(_request: Request, exc: OperationalError) -> JSONResponse:
         log.error("database unavailable: %s", exc)
-        return JSONResponse({"detail": "the job database is unavailable; try again shortly"}, status_code=503,
-                            headers={"Retry-After": "5"})
+        return JSONResponse(
+            {"detail": "the job database is unavailable; try again shortly"},
+            status_code=503,
+            headers={"Retry-After": "5"},
+        )
 
     @app.exception_handler(SQLAlchemyTimeoutError)
     async def _pool_full(_request: Request, exc: SQLAlchemyTimeoutError) -> JSONResponse:
         log.error("no database connection free: %s", exc)
-        return JSONResponse({"detail": "the service is busy (no database connection free); try again shortly"},
-                            status_code=503, headers={"Retry-After": "5"})
+        return JSONResponse(
+            {"detail": "the service is busy (no database connection free); try again shortly"},
+            status_code=503,
+            headers={"Retry-After": "5"},
+        )
 
     @app.exception_handler(SQLAlchemyError)
     async def _db_error(_request: Request, exc: SQLAlchemyError) -> JSONResponse:
@@ -127,9 +134,16 @@ def _misc_router() -> APIRouter:
     @r.get("/presets", response_model=list[PresetInfo], tags=["specs"])
     def list_presets() -> list[PresetInfo]:
         """The named specs. Submit one with `{"preset": NAME}`."""
-        return [PresetInfo(name=n, algorithm=s.algorithm, grid_size=s.design.grid_size,
-                           total_env_steps=s.training.total_env_steps, url=f"/api/presets/{n}")
-                for n, s in PRESETS.items()]
+        return [
+            PresetInfo(
+                name=n,
+                algorithm=s.algorithm,
+                grid_size=s.design.grid_size,
+                total_env_steps=s.training.total_env_steps,
+                url=f"/api/presets/{n}",
+            )
+            for n, s in PRESETS.items()
+        ]
 
     @r.get("/presets/{name}", response_model=JobSpec, tags=["specs"], responses={404: {"description": "Unknown"}})
     def get_preset(name: str) -> JobSpec:
@@ -147,9 +161,13 @@ def _misc_router() -> APIRouter:
     def health(store: StoreDep) -> Health:
         """Database reachable, jobs per status, live workers."""
         workers = store.live_workers()
-        return Health(status="ok", version=modsat_core.__version__, database=store.backend,
-                      jobs=store.status_counts(),
-                      workers=[{k: w[k] for k in ("id", "hostname", "pid", "runner", "job_id")} for w in workers])
+        return Health(
+            status="ok",
+            version=modsat_core.__version__,
+            database=store.backend,
+            jobs=store.status_counts(),
+            workers=[{k: w[k] for k in ("id", "hostname", "pid", "runner", "job_id")} for w in workers],
+        )
 
     return r
 
@@ -190,8 +208,9 @@ def _openapi(app: FastAPI, token: bool):
     return build
 
 
-def create_app(settings: ServerSettings | None = None, store: JobStore | None = None,
-               announce: Callable[[str], None] | None = None) -> FastAPI:
+def create_app(
+    settings: ServerSettings | None = None, store: JobStore | None = None, announce: Callable[[str], None] | None = None
+) -> FastAPI:
     """The API. ``store`` defaults to one opened from ``settings`` (created tables included);
     ``announce`` is told the live viewer's address once it runs (``modsat serve`` prints it)."""
     settings = settings or ServerSettings()
@@ -203,8 +222,11 @@ def create_app(settings: ServerSettings | None = None, store: JobStore | None = 
         app.state.store.create_schema()
         app.state.viewer = start_viewer(settings, app.state.store)
         if announce is not None:
-            announce(f"port {app.state.viewer.port} (embedded in the page; also http://HOST:{app.state.viewer.port}/)"
-                     if app.state.viewer is not None else "off")
+            announce(
+                f"port {app.state.viewer.port} (embedded in the page; also http://HOST:{app.state.viewer.port}/)"
+                if app.state.viewer is not None
+                else "off"
+            )
         try:
             yield
         finally:
@@ -214,10 +236,14 @@ def create_app(settings: ServerSettings | None = None, store: JobStore | None = 
                 app.state.store.dispose()
 
     app = FastAPI(
-        title="modsat job service", version=modsat_core.__version__, lifespan=lifespan,
+        title="modsat job service",
+        version=modsat_core.__version__,
+        lifespan=lifespan,
         description="Submit co-design training runs of modular satellites, follow them, download the results. "
         "See docs/service.md.",
-        openapi_url="/api/openapi.json", docs_url="/api/docs", redoc_url=None,
+        openapi_url="/api/openapi.json",
+        docs_url="/api/docs",
+        redoc_url=None,
     )
     app.state.settings = settings
     if store is not None:

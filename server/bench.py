@@ -120,8 +120,19 @@ def bench_api(url: str, *, jobs: int = 1000, clients: int = 50, requests: int = 
     port = _free_port()
     base = f"http://127.0.0.1:{port}"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "uvicorn", "server.app:create_app", "--factory", "--port", str(port),
-         "--log-level", "warning", "--timeout-keep-alive", "30"],
+        [
+            sys.executable,
+            "-m",
+            "uvicorn",
+            "server.app:create_app",
+            "--factory",
+            "--port",
+            str(port),
+            "--log-level",
+            "warning",
+            "--timeout-keep-alive",
+            "30",
+        ],
         env={**os.environ, "MODSAT_DB_URL": url},
     )
     try:
@@ -146,11 +157,19 @@ def bench_api(url: str, *, jobs: int = 1000, clients: int = 50, requests: int = 
         proc.wait(15)
     lat_ms = sorted(x * 1000 for x in lat)
     q = statistics.quantiles(lat_ms, n=100)
-    return {"endpoint": "GET /api/jobs (limit 50, total count)", "jobs_stored": jobs, "clients": clients,
-            "requests": len(lat_ms), "p50_ms": round(q[49], 1), "p90_ms": round(q[89], 1),
-            "p99_ms": round(q[98], 1), "max_ms": round(lat_ms[-1], 1), "requests_per_s": round(len(lat_ms) / wall, 1),
-            "server_cpu_ms_per_request": round(1000 * server_cpu / len(lat_ms), 2) if server_cpu else None,
-            "load_average_1min": round(os.getloadavg()[0], 2)}
+    return {
+        "endpoint": "GET /api/jobs (limit 50, total count)",
+        "jobs_stored": jobs,
+        "clients": clients,
+        "requests": len(lat_ms),
+        "p50_ms": round(q[49], 1),
+        "p90_ms": round(q[89], 1),
+        "p99_ms": round(q[98], 1),
+        "max_ms": round(lat_ms[-1], 1),
+        "requests_per_s": round(len(lat_ms) / wall, 1),
+        "server_cpu_ms_per_request": round(1000 * server_cpu / len(lat_ms), 2) if server_cpu else None,
+        "load_average_1min": round(os.getloadavg()[0], 2),
+    }
 
 
 def _cpu_seconds(pid: int) -> float:
@@ -199,8 +218,15 @@ def bench_claims(url: str, *, jobs: int = 1000, workers: int = 4, mode: str = "c
     store.dispose()
     if sum(counts) != jobs:
         raise RuntimeError(f"claimed {sum(counts)} of {jobs} jobs")
-    return {"mode": mode, "jobs": jobs, "workers": workers, "seconds": round(wall, 3),
-            "jobs_per_s": round(jobs / wall, 1), "per_worker": counts, "final_status": counts_db}
+    return {
+        "mode": mode,
+        "jobs": jobs,
+        "workers": workers,
+        "seconds": round(wall, 3),
+        "jobs_per_s": round(jobs / wall, 1),
+        "per_worker": counts,
+        "final_status": counts_db,
+    }
 
 
 def bench_worker_processes(url: str, *, jobs: int = 100, workers: int = 4) -> dict:
@@ -209,8 +235,15 @@ def bench_worker_processes(url: str, *, jobs: int = 100, workers: int = 4) -> di
     store.create_schema()
     _fill(store, jobs, total_env_steps=1)
     env = {**os.environ, "MODSAT_POLL_S": "0.05", "MODSAT_RUNNER": "noop"}
-    procs = [subprocess.Popen([sys.executable, "-m", "worker", "--db", url, "--idle-exit", "1.0"], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for _ in range(workers)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "worker", "--db", url, "--idle-exit", "1.0"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for _ in range(workers)
+    ]
     t0 = time.perf_counter()
     while store.status_counts().get("succeeded", 0) < jobs:
         if all(p.poll() is not None for p in procs):
@@ -220,16 +253,25 @@ def bench_worker_processes(url: str, *, jobs: int = 100, workers: int = 4) -> di
     for p in procs:
         p.wait(30)
     store.dispose()
-    return {"mode": "worker processes, noop runner (child process per job)", "jobs": jobs, "workers": workers,
-            "seconds": round(wall, 2), "jobs_per_s": round(jobs / wall, 1)}
+    return {
+        "mode": "worker processes, noop runner (child process per job)",
+        "jobs": jobs,
+        "workers": workers,
+        "seconds": round(wall, 2),
+        "jobs_per_s": round(jobs / wall, 1),
+    }
 
 
 # ----------------------------------------------------------------------------- torch threads
 
 #: The `quick` preset cut to a benchmark: 1,008 env steps, learning from step 256, 8 final slews.
-THREADS_JOB = {"preset": "quick", "overrides": {
-    "training": {"total_env_steps": 1008, "learning_starts": 256, "eval_every_steps": 100_000},
-    "evaluation": {"episodes": 8}}}
+THREADS_JOB = {
+    "preset": "quick",
+    "overrides": {
+        "training": {"total_env_steps": 1008, "learning_starts": 256, "eval_every_steps": 100_000},
+        "evaluation": {"episodes": 8},
+    },
+}
 
 
 def _busy() -> None:
@@ -252,9 +294,24 @@ def bench_threads(threads: list[int], busy: int = 1) -> dict:
                 port = _free_port()
                 env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
                 proc = subprocess.Popen(
-                    [sys.executable, "-m", "server.cli", "serve", "--workers", "1", "--port", str(port),
-                     "--no-viewer", "--data-dir", tmp], env={**env, "MODSAT_TORCH_THREADS": str(n)},
-                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+                    [
+                        sys.executable,
+                        "-m",
+                        "server.cli",
+                        "serve",
+                        "--workers",
+                        "1",
+                        "--port",
+                        str(port),
+                        "--no-viewer",
+                        "--data-dir",
+                        tmp,
+                    ],
+                    env={**env, "MODSAT_TORCH_THREADS": str(n)},
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    start_new_session=True,
+                )
                 try:
                     c = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=30)
                     deadline = time.monotonic() + 60
@@ -289,12 +346,21 @@ def bench_threads(threads: list[int], busy: int = 1) -> dict:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m server.bench", description=__doc__.split("\n\n")[0])
     p.add_argument("what", nargs="*", help="api and/or queue (default: both), or threads")
-    p.add_argument("--threads", type=int, nargs="+", default=[1, 2],
-                   help="threads: MODSAT_TORCH_THREADS values to compare (default 1 2)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        nargs="+",
+        default=[1, 2],
+        help="threads: MODSAT_TORCH_THREADS values to compare (default 1 2)",
+    )
     p.add_argument("--busy", type=int, default=1, help="threads: other CPU-bound processes meanwhile (default 1)")
     p.add_argument("--db", nargs="+", choices=["sqlite", "postgresql"], default=["sqlite", "postgresql"])
-    p.add_argument("--pg", default=os.environ.get("MODSAT_BENCH_PG_URL", DEFAULT_PG), metavar="URL",
-                   help="admin URL of a PostgreSQL server (a database is created and dropped)")
+    p.add_argument(
+        "--pg",
+        default=os.environ.get("MODSAT_BENCH_PG_URL", DEFAULT_PG),
+        metavar="URL",
+        help="admin URL of a PostgreSQL server (a database is created and dropped)",
+    )
     p.add_argument("--jobs", type=int, default=1000)
     p.add_argument("--clients", type=int, default=50)
     p.add_argument("--requests", type=int, default=3000)
@@ -305,14 +371,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.what == ["threads"]:
         if not all(1 <= n <= 256 for n in args.threads) or not 0 <= args.busy <= 64:
             p.error("--threads from 1 to 256, --busy from 0 to 64")
-        print(json.dumps({"machine": {"cpus": os.cpu_count()}, "threads": bench_threads(args.threads, args.busy)},
-                         indent=2))
+        print(
+            json.dumps(
+                {"machine": {"cpus": os.cpu_count()}, "threads": bench_threads(args.threads, args.busy)}, indent=2
+            )
+        )
         return 0
     if set(args.what) - {"api", "queue"}:
         p.error("what to measure: api and/or queue, or threads alone")
 
-    report: dict = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                                "platform": platform.platform()}, "results": {}}
+    report: dict = {
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
+        "results": {},
+    }
     with tempfile.TemporaryDirectory(prefix="modsat-bench-") as tmp:
         for kind, url, cleanup in _databases(args.db, args.pg, Path(tmp)):
             res: dict = {}

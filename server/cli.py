@@ -36,33 +36,43 @@ MAX_BENCH_CELL_ROWS = 256_000
 def _cmd_bench_update(args: argparse.Namespace) -> int:
     from modsat_core.bench_update import bench_update
 
-    if not (1 <= args.rounds <= 100 and 1 <= args.batch_size <= 65536 and all(2 <= n <= 10 for n in args.grids)
-            and all(4 <= h <= 2048 for h in args.hidden) and len(args.hidden) <= 4):
-        raise SystemExit("modsat bench update: --rounds must be 1 to 100, --batch-size 1 to 65,536, --grids between "
-                         "2 and 10, --hidden at most 4 sizes of 4 to 2,048")
+    if not (
+        1 <= args.rounds <= 100
+        and 1 <= args.batch_size <= 65536
+        and all(2 <= n <= 10 for n in args.grids)
+        and all(4 <= h <= 2048 for h in args.hidden)
+        and len(args.hidden) <= 4
+    ):
+        raise SystemExit(
+            "modsat bench update: --rounds must be 1 to 100, --batch-size 1 to 65,536, --grids between "
+            "2 and 10, --hidden at most 4 sizes of 4 to 2,048"
+        )
     if args.batch_size * max(args.grids) ** 3 > MAX_BENCH_CELL_ROWS:
         # The per-module network holds batch x N^3 rows of every layer's activations.
-        raise SystemExit(f"modsat bench update: --batch-size x N^3 of the largest grid must be at most "
-                         f"{MAX_BENCH_CELL_ROWS:,} (the per-module network's rows per layer); got "
-                         f"{args.batch_size * max(args.grids) ** 3:,}")
-    report = bench_update(grids=tuple(args.grids), hidden=tuple(args.hidden), batch=args.batch_size,
-                          rounds=args.rounds)
+        raise SystemExit(
+            f"modsat bench update: --batch-size x N^3 of the largest grid must be at most "
+            f"{MAX_BENCH_CELL_ROWS:,} (the per-module network's rows per layer); got "
+            f"{args.batch_size * max(args.grids) ** 3:,}"
+        )
+    report = bench_update(grids=tuple(args.grids), hidden=tuple(args.hidden), batch=args.batch_size, rounds=args.rounds)
     if args.json:
         print(json.dumps(report, indent=2))
     else:
-        print(f"{report['unit']}, batch {report['batch_size']}, {report['hidden_sizes']}, "
-              f"{report['threads']} thread(s)")
+        print(
+            f"{report['unit']}, batch {report['batch_size']}, {report['hidden_sizes']}, {report['threads']} thread(s)"
+        )
         for grid, r in report["results"].items():
-            print(f"  {grid}: flat {r['flat_ms']:.1f} ms, per-module {r['per-module_ms']:.1f} ms "
-                  f"(x{r['per-module_ratio']:.1f}), set {r['set_ms']:.1f} ms (x{r['set_ratio']:.1f}); "
-                  f"features {r['features_ms']:.1f} ms")
+            print(
+                f"  {grid}: flat {r['flat_ms']:.1f} ms, per-module {r['per-module_ms']:.1f} ms "
+                f"(x{r['per-module_ratio']:.1f}), set {r['set_ms']:.1f} ms (x{r['set_ratio']:.1f}); "
+                f"features {r['features_ms']:.1f} ms"
+            )
     return 0
 
 
 def _cmd_bench_learning(args: argparse.Namespace) -> int:
     _set_threads(None)
     from modsat_core.bench_learning import bench_learn, bench_rl_vs_ga
-
 
     spec = _load_spec(args)
     if args.out:  # before hours of training, not after
@@ -80,7 +90,6 @@ def _cmd_bench_learning(args: argparse.Namespace) -> int:
 def _cmd_bench_control(args: argparse.Namespace) -> int:
     _set_threads(None)
     from modsat_core.bench_control import bench_control
-
 
     if args.eval_every < 1:
         raise SystemExit("modsat bench control: --eval-every must be at least 1")
@@ -143,8 +152,9 @@ def _limits():
     try:
         return WorkerSettings().limits()
     except ValidationError as exc:
-        raise SystemExit(f"modsat: bad MODSAT_* setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}"
-                         ) from None
+        raise SystemExit(
+            f"modsat: bad MODSAT_* setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}"
+        ) from None
 
 
 def _check_limits(spec, command: str) -> None:
@@ -152,8 +162,11 @@ def _check_limits(spec, command: str) -> None:
 
     problems = check(spec, _limits())
     if problems:
-        print(f"modsat {command}: this spec is over the limits (raise them with the MODSAT_* variables named if "
-              "this machine can take it):\n  " + "\n  ".join(m for _, m in problems), file=sys.stderr)
+        print(
+            f"modsat {command}: this spec is over the limits (raise them with the MODSAT_* variables named if "
+            "this machine can take it):\n  " + "\n  ".join(m for _, m in problems),
+            file=sys.stderr,
+        )
         raise SystemExit(2)
 
 
@@ -165,8 +178,10 @@ def _cmd_check(args: argparse.Namespace) -> int:
         spec = parse_spec(fh.read())
     _check_limits(spec, "check")
     est = estimate(spec)
-    print(f"ok: {spec.algorithm}, {spec.design.grid_size}^3 grid, {spec.training.total_env_steps:,} env steps, "
-          f"about {est.memory_bytes / 2**30:.1f} GiB of memory (replay buffer {est.replay_bytes / 2**30:.2f} GiB)")
+    print(
+        f"ok: {spec.algorithm}, {spec.design.grid_size}^3 grid, {spec.training.total_env_steps:,} env steps, "
+        f"about {est.memory_bytes / 2**30:.1f} GiB of memory (replay buffer {est.replay_bytes / 2**30:.2f} GiB)"
+    )
     return 0
 
 
@@ -237,8 +252,10 @@ class _ProgressBar:
             self.last_eval = f"eval return {e['mean_return']:.1f}, success {100 * e['success_rate']:.0f}%"
         width = 24
         fill = int(width * min(done / total, 1.0))
-        line = (f"[{'#' * fill}{'.' * (width - fill)}] {done:,}/{total:,} steps  {rate:,.0f} steps/s  "
-                f"eta {eta:,.0f} s  {p.get('phase', '')}  {self.last_eval}")
+        line = (
+            f"[{'#' * fill}{'.' * (width - fill)}] {done:,}/{total:,} steps  {rate:,.0f} steps/s  "
+            f"eta {eta:,.0f} s  {p.get('phase', '')}  {self.last_eval}"
+        )
         if self.tty:
             self.stream.write("\r" + line[:160].ljust(160))
         elif p.get("eval") or p.get("phase") == "evaluating":
@@ -281,15 +298,18 @@ def _cmd_train(args: argparse.Namespace) -> int:
     old = {sig: signal.signal(sig, on_sigint) for sig in (signal.SIGINT, signal.SIGTERM)}
     bar = _ProgressBar()
     try:
-        result = train(spec, on_progress=bar, on_checkpoint=save_ckpt, should_stop=lambda: stop["flag"],
-                       checkpoint=checkpoint)
+        result = train(
+            spec, on_progress=bar, on_checkpoint=save_ckpt, should_stop=lambda: stop["flag"], checkpoint=checkpoint
+        )
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
         bar.close()
     if result.stopped:
-        print(f"stopped at {result.env_steps:,} env steps; continue with: modsat train ... --out {out} --resume",
-              file=sys.stderr)
+        print(
+            f"stopped at {result.env_steps:,} env steps; continue with: modsat train ... --out {out} --resume",
+            file=sys.stderr,
+        )
         return 130
     from modsat_core.verify import add_verification
     from web.recording import (
@@ -300,9 +320,15 @@ def _cmd_train(args: argparse.Namespace) -> int:
     add_recording(files)
     if add_verification(files):
         report = json.loads(files["verification.json"])
-        print("modsat train: " + ("the evaluation slews were flown in Basilisk too: verification.json"
-                                  if report["available"] else f"no Basilisk verification: {report['reason']}"),
-              file=sys.stderr)
+        print(
+            "modsat train: "
+            + (
+                "the evaluation slews were flown in Basilisk too: verification.json"
+                if report["available"]
+                else f"no Basilisk verification: {report['reason']}"
+            ),
+            file=sys.stderr,
+        )
     for name, data in files.items():
         with open(os.path.join(out, name), "wb") as fh:
             fh.write(data)
@@ -319,8 +345,10 @@ def _print_evaluation(summary: dict, stream) -> None:
     s = RunSummary.parse(summary)
     d = s.design
     print(f"design: {d and d.modules} modules, {d and d.actuators} actuators, valid={d and d.valid}", file=stream)
-    print(f"{'':<12} {'episodes':>8} {'success':>8} {'@0.25deg':>9} {'@1deg':>7} {'return':>16} "
-          f"{'slew/bound':>10}", file=stream)
+    print(
+        f"{'':<12} {'episodes':>8} {'success':>8} {'@0.25deg':>9} {'@1deg':>7} {'return':>16} {'slew/bound':>10}",
+        file=stream,
+    )
     for name, ev in (("policy", s.policy), ("PD baseline", s.pd_baseline)):
         if ev is None:
             continue
@@ -329,9 +357,12 @@ def _print_evaluation(summary: dict, stream) -> None:
             return "-" if value is None else f"{100 * value:.0f}%"
 
         ratio, ret = ev.median_slew_time_ratio, ev.mean_return
-        print(f"{name:<12} {ev.episodes:>8} {pct(ev.success_rate):>8} {pct(ev.success_at(0.25)):>9} "
-              f"{pct(ev.success_at(1.0)):>7} {'-' if ret is None else f'{ret:.1f}':>8} +/- {ev.std_return or 0:<5.1f} "
-              f"{'-' if ratio is None else f'{ratio:.2f}':>10}", file=stream)
+        print(
+            f"{name:<12} {ev.episodes:>8} {pct(ev.success_rate):>8} {pct(ev.success_at(0.25)):>9} "
+            f"{pct(ev.success_at(1.0)):>7} {'-' if ret is None else f'{ret:.1f}':>8} +/- {ev.std_return or 0:<5.1f} "
+            f"{'-' if ratio is None else f'{ratio:.2f}':>10}",
+            file=stream,
+        )
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
@@ -357,8 +388,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         from modsat_core.reports import design_report
 
         d = design_report(grid, spec).figures()
-        summary = {"design": d.to_dict(), "policy": ev["policy"]["summary"],
-                   "pd_baseline": ev["pd_baseline"]["summary"] if ev["pd_baseline"] else None}
+        summary = {
+            "design": d.to_dict(),
+            "policy": ev["policy"]["summary"],
+            "pd_baseline": ev["pd_baseline"]["summary"] if ev["pd_baseline"] else None,
+        }
         _print_evaluation(summary, sys.stdout)
     return 0
 
@@ -383,8 +417,12 @@ def _cmd_verify(args: argparse.Namespace) -> int:
     coulomb, viscous = args.wheel_friction or (0.0, 0.0)
     inertia = DEFAULT_WHEEL_INERTIA_KGM2 if args.wheel_inertia is None else args.wheel_inertia
     try:
-        wheels = WheelOptions(speed_max_rpm=args.wheel_speed_max, coulomb_friction_Nm=coulomb,
-                              viscous_friction_Nms=viscous, inertia_kgm2=inertia)
+        wheels = WheelOptions(
+            speed_max_rpm=args.wheel_speed_max,
+            coulomb_friction_Nm=coulomb,
+            viscous_friction_Nms=viscous,
+            inertia_kgm2=inertia,
+        )
         report = verify_run(args.run_dir, episodes=args.episodes, wheels=wheels, log=_log)
     except ValueError as exc:  # a bad option, spec or design: a message, not a traceback
         print(f"modsat verify: {exc}", file=sys.stderr)
@@ -394,8 +432,9 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="modsat",
-                                description="Co-design of modular satellites and their attitude control.")
+    p = argparse.ArgumentParser(
+        prog="modsat", description="Co-design of modular satellites and their attitude control."
+    )
     sub = p.add_subparsers(dest="command", required=True)
 
     b = sub.add_parser("bench", help="benchmarks (not tests): print rates and ratios")
@@ -413,8 +452,10 @@ def build_parser() -> argparse.ArgumentParser:
     bu.add_argument("--batch-size", type=int, default=256, help="transitions per update (default 256)")
     bu.add_argument("--rounds", type=int, default=5, help="timed rounds, networks taking turns (default 5)")
     bu.set_defaults(func=_cmd_bench_update)
-    for what, text in (("learn", "train a spec over several seeds: wall time, success at 0.25/1 deg, PD comparison"),
-                       ("rl-vs-ga", "RL co-design vs the GA baseline at the same env-step budget, several seeds")):
+    for what, text in (
+        ("learn", "train a spec over several seeds: wall time, success at 0.25/1 deg, PD comparison"),
+        ("rl-vs-ga", "RL co-design vs the GA baseline at the same env-step budget, several seeds"),
+    ):
         bl = bsub.add_parser(what, help=text)
         bl.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
         bl.add_argument("--preset", help="a named preset (see `modsat presets`)")
@@ -424,12 +465,18 @@ def build_parser() -> argparse.ArgumentParser:
         bl.add_argument("--out", help="also write each run's outputs and the JSON report here")
         if what == "rl-vs-ga":
             bl.add_argument("--population", type=int, default=6, help="GA population size (default 6)")
-            bl.add_argument("--steps-per-design", type=int, default=10_000,
-                            help="GA: TD3 env steps per evaluated design (default 10,000)")
+            bl.add_argument(
+                "--steps-per-design",
+                type=int,
+                default=10_000,
+                help="GA: TD3 env steps per evaluated design (default 10,000)",
+            )
         bl.set_defaults(func=_cmd_bench_learning, seed=None)
 
-    bc = bsub.add_parser("control", help="flat-MLP TD3 flying one fixed design on a spec's mission: "
-                         "is the mission learnable, at what cost")
+    bc = bsub.add_parser(
+        "control",
+        help="flat-MLP TD3 flying one fixed design on a spec's mission: is the mission learnable, at what cost",
+    )
     bc.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
     bc.add_argument("--preset", help="a named preset (see `modsat presets`)")
     bc.add_argument("--steps", type=int, help="override training.total_env_steps")
@@ -460,9 +507,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, help="override the seed")
     tr.add_argument("--device", choices=["auto", "cpu", "cuda"], help="override training.device")
     tr.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt (after Ctrl-C)")
-    tr.add_argument("--threads", type=int,
-                    help="torch threads (default: MODSAT_TORCH_THREADS, else 1; one per training process is fastest "
-                    "on a busy machine)")
+    tr.add_argument(
+        "--threads",
+        type=int,
+        help="torch threads (default: MODSAT_TORCH_THREADS, else 1; one per training process is fastest "
+        "on a busy machine)",
+    )
     tr.set_defaults(func=_cmd_train)
 
     ev = sub.add_parser("eval", help="Monte-Carlo evaluation of a trained run (policy and PD baseline)")
@@ -471,19 +521,37 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--json", action="store_true")
     ev.set_defaults(func=_cmd_eval)
 
-    vf = sub.add_parser("verify", help="fly a run's evaluation slews in Basilisk beside modsat's simulator and compare "
-                        "(docs/verification.md)")
+    vf = sub.add_parser(
+        "verify",
+        help="fly a run's evaluation slews in Basilisk beside modsat's simulator and compare (docs/verification.md)",
+    )
     vf.add_argument("run_dir", help="a directory written by `modsat train`")
-    vf.add_argument("--basilisk", action="store_true",
-                    help="fly them in Basilisk (needs the optional extra: pip install -e '.[basilisk]')")
+    vf.add_argument(
+        "--basilisk",
+        action="store_true",
+        help="fly them in Basilisk (needs the optional extra: pip install -e '.[basilisk]')",
+    )
     vf.add_argument("--episodes", type=int, help="number of seeded slews (default: the spec's)")
     vf.add_argument("--json", action="store_true")
-    vf.add_argument("--wheel-speed-max", type=float, metavar="RPM",
-                    help="Basilisk's wheel-speed limit (a less ideal plant: agreement no longer expected)")
-    vf.add_argument("--wheel-friction", type=float, nargs=2, metavar=("COULOMB_NM", "VISCOUS_NMS"),
-                    help="Basilisk's wheel friction: Coulomb torque (N m) and viscous coefficient (N m s/rad)")
-    vf.add_argument("--wheel-inertia", type=float, metavar="KGM2",
-                    help="wheel spin inertia Js (default 0.01; alone it changes nothing, with a speed limit it does)")
+    vf.add_argument(
+        "--wheel-speed-max",
+        type=float,
+        metavar="RPM",
+        help="Basilisk's wheel-speed limit (a less ideal plant: agreement no longer expected)",
+    )
+    vf.add_argument(
+        "--wheel-friction",
+        type=float,
+        nargs=2,
+        metavar=("COULOMB_NM", "VISCOUS_NMS"),
+        help="Basilisk's wheel friction: Coulomb torque (N m) and viscous coefficient (N m s/rad)",
+    )
+    vf.add_argument(
+        "--wheel-inertia",
+        type=float,
+        metavar="KGM2",
+        help="wheel spin inertia Js (default 0.01; alone it changes nothing, with a speed limit it does)",
+    )
     vf.set_defaults(func=_cmd_verify)
 
     _add_service_commands(sub)
@@ -512,7 +580,6 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.flush()  # here, where a closed pipe is caught, not at exit
         return rc
     except BrokenPipeError:  # e.g. `modsat presets quick | head`: the reader left; say nothing
-
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 141

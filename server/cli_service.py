@@ -23,19 +23,30 @@ def add_commands(sub) -> None:
     s.add_argument("--host", help="address to listen on (default 127.0.0.1)")
     s.add_argument("--port", type=int, help="port to listen on (default 8000)")
     s.add_argument("--runner", help="what workers run: train (default), or noop / simulated / raise for tests")
-    s.add_argument("--viewer-port", type=int, metavar="PORT",
-                   help="port of the live 3D viewer (default 8080; 0 = any free port; a busy port moves up)")
+    s.add_argument(
+        "--viewer-port",
+        type=int,
+        metavar="PORT",
+        help="port of the live 3D viewer (default 8080; 0 = any free port; a busy port moves up)",
+    )
     s.add_argument("--no-viewer", action="store_true", help="do not run the live 3D viewer")
     s.set_defaults(func=_cmd_serve)
 
     v = sub.add_parser("view", help="show runs written by `modsat train --out DIR` in the 3D viewer (no service)")
-    v.add_argument("run_dirs", nargs="+", metavar="RUN_DIR",
-                   help="one run, or two to see them side by side (e.g. RL and GA); more can be picked in the viewer")
+    v.add_argument(
+        "run_dirs",
+        nargs="+",
+        metavar="RUN_DIR",
+        help="one run, or two to see them side by side (e.g. RL and GA); more can be picked in the viewer",
+    )
     v.add_argument("--port", type=int, default=8080, help="port of the viewer (default 8080; a busy port moves up)")
     v.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
-    v.add_argument("--save", metavar="FILE",
-                   help="write the first run's evaluation recording instead (FILE.viser, or FILE.html: one "
-                        "self-contained page) and exit")
+    v.add_argument(
+        "--save",
+        metavar="FILE",
+        help="write the first run's evaluation recording instead (FILE.viser, or FILE.html: one "
+        "self-contained page) and exit",
+    )
     v.set_defaults(func=_cmd_view)
 
     w = sub.add_parser("worker", help="run one worker that pulls jobs from the job store at --db URL")
@@ -101,8 +112,15 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     if args.workers < 0 or args.workers > 256:
         print("modsat serve: --workers must be between 0 and 256", file=sys.stderr)
         return 2
-    given = {"db_url": args.db, "data_dir": args.data_dir, "host": args.host, "port": args.port,
-             "runner": args.runner, "viewer_port": args.viewer_port, "viewer": False if args.no_viewer else None}
+    given = {
+        "db_url": args.db,
+        "data_dir": args.data_dir,
+        "host": args.host,
+        "port": args.port,
+        "runner": args.runner,
+        "viewer_port": args.viewer_port,
+        "viewer": False if args.no_viewer else None,
+    }
     try:
         settings = ServerSettings(**{k: v for k, v in given.items() if v is not None})
     except ValidationError as exc:
@@ -110,8 +128,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         return 2
     busy = _port_in_use(settings.host, settings.port)
     if busy:
-        print(f"modsat serve: cannot listen on {settings.host}:{settings.port}: {busy} (is another `modsat serve` "
-              "running?); choose another port with --port", file=sys.stderr)
+        print(
+            f"modsat serve: cannot listen on {settings.host}:{settings.port}: {busy} (is another `modsat serve` "
+            "running?); choose another port with --port",
+            file=sys.stderr,
+        )
         return 1
     url = settings.resolved_db_url
     try:
@@ -134,21 +155,34 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     print(f"modsat: web UI     {base}/", flush=True)
     print(f"modsat: {args.workers} local worker(s); add more anywhere with: modsat worker --db URL", flush=True)
     if settings.host in ("0.0.0.0", "::") and not settings.allowed_hosts:
-        print("modsat: listening on every interface, but answering only to localhost names: set "
-              "MODSAT_ALLOWED_HOSTS to the names or addresses others use to reach this machine", flush=True)
+        print(
+            "modsat: listening on every interface, but answering only to localhost names: set "
+            "MODSAT_ALLOWED_HOSTS to the names or addresses others use to reach this machine",
+            flush=True,
+        )
 
     env = dict(os.environ, MODSAT_RUNNER=settings.runner)
     procs = [
-        subprocess.Popen([sys.executable, "-m", "worker", "--db", url, "--exit-with-parent", str(os.getpid())],
-                         env=env, start_new_session=True)  # Ctrl-C reaches us; we stop them in order
+        subprocess.Popen(
+            [sys.executable, "-m", "worker", "--db", url, "--exit-with-parent", str(os.getpid())],
+            env=env,
+            start_new_session=True,
+        )  # Ctrl-C reaches us; we stop them in order
         for _ in range(args.workers)
     ]
 
     def announce(where: str) -> None:
         print(f"modsat: 3D viewer  {where.replace('HOST', shown_host)}", flush=True)
 
-    server = uvicorn.Server(uvicorn.Config(create_app(settings, announce=announce), host=settings.host,
-                                           port=settings.port, log_level="info", timeout_graceful_shutdown=3))
+    server = uvicorn.Server(
+        uvicorn.Config(
+            create_app(settings, announce=announce),
+            host=settings.host,
+            port=settings.port,
+            log_level="info",
+            timeout_graceful_shutdown=3,
+        )
+    )
     try:
         server.run()
     except (KeyboardInterrupt, SystemExit):  # uvicorn re-raises the Ctrl-C it handled, exits if it cannot bind
@@ -177,8 +211,12 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
         run_dir = Path(args.run_dirs[0])
         spec = run_dir / "spec.json"
-        data = recording_bytes((run_dir / "design.json").read_bytes(), (run_dir / "trajectories.json").read_bytes(),
-                               spec_json=spec.read_bytes() if spec.is_file() else None, title=run_dir.name)
+        data = recording_bytes(
+            (run_dir / "design.json").read_bytes(),
+            (run_dir / "trajectories.json").read_bytes(),
+            spec_json=spec.read_bytes() if spec.is_file() else None,
+            title=run_dir.name,
+        )
         out = Path(args.save)
         if out.suffix.lower() == ".html":
             data = recording_html(data).encode()
@@ -188,8 +226,13 @@ def _cmd_view(args: argparse.Namespace) -> int:
     if not 0 <= args.port <= 65535:
         print("modsat view: --port must be between 0 and 65535", file=sys.stderr)
         return 2
-    app = ViewerApp(source, host=args.host, port=args.port, label="modsat view",
-                    allowed_hosts=os.environ.get("MODSAT_ALLOWED_HOSTS", ""))
+    app = ViewerApp(
+        source,
+        host=args.host,
+        port=args.port,
+        label="modsat view",
+        allowed_hosts=os.environ.get("MODSAT_ALLOWED_HOSTS", ""),
+    )
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     names = " vs ".join(Path(p).name for p in args.run_dirs[:2])
     print(f"modsat view: {names} at http://{shown}:{app.port}/  (Ctrl-C to stop)", flush=True)
@@ -201,4 +244,3 @@ def _cmd_view(args: argparse.Namespace) -> int:
     finally:
         app.stop()
     return 0
-

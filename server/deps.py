@@ -39,7 +39,9 @@ def require_token(
         raise HTTPException(
             status_code=401,
             detail="this server needs a bearer token for writes: send 'Authorization: Bearer <token>' "
-            "(the value of MODSAT_API_TOKEN)" if not given else "the bearer token is not the right one",
+            "(the value of MODSAT_API_TOKEN)"
+            if not given
+            else "the bearer token is not the right one",
             headers={"WWW-Authenticate": "Bearer"},
         )
 

@@ -35,15 +35,20 @@ router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
 _SUBMIT_BODY = {
     "required": True,
-    "content": {"application/json": {
-        "schema": {"oneOf": [{"$ref": "#/components/schemas/JobSpec"},
-                             {"$ref": "#/components/schemas/PresetSubmission"}]},
-        "examples": {
-            "preset": {"summary": "A preset", "value": {"preset": "quick"}},
-            "preset-overrides": {"summary": "A preset with changes",
-                                 "value": {"preset": "quick", "overrides": {"seed": 7}}},
-        },
-    }},
+    "content": {
+        "application/json": {
+            "schema": {
+                "oneOf": [{"$ref": "#/components/schemas/JobSpec"}, {"$ref": "#/components/schemas/PresetSubmission"}]
+            },
+            "examples": {
+                "preset": {"summary": "A preset", "value": {"preset": "quick"}},
+                "preset-overrides": {
+                    "summary": "A preset with changes",
+                    "value": {"preset": "quick", "overrides": {"seed": 7}},
+                },
+            },
+        }
+    },
 }
 _ERRORS: dict[int | str, dict[str, Any]] = {404: {"description": "Unknown job"}}
 
@@ -59,11 +64,19 @@ def _detail(store, job_id: int) -> JobDetail | None:
     return job_detail(row, store.latest_metrics(job_id), store.list_attempts(job_id))
 
 
-@router.post("", status_code=201, response_model=JobDetail, dependencies=[WriteAccess], openapi_extra={
-    "requestBody": _SUBMIT_BODY}, responses={400: {"description": "Body is not JSON"},
-                                            401: {"description": "Missing or wrong bearer token"},
-                                            413: {"description": "Body too large"},
-                                            422: {"description": "Invalid spec; `messages` name each field"}})
+@router.post(
+    "",
+    status_code=201,
+    response_model=JobDetail,
+    dependencies=[WriteAccess],
+    openapi_extra={"requestBody": _SUBMIT_BODY},
+    responses={
+        400: {"description": "Body is not JSON"},
+        401: {"description": "Missing or wrong bearer token"},
+        413: {"description": "Body too large"},
+        422: {"description": "Invalid spec; `messages` name each field"},
+    },
+)
 async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
     """Queue a training run. The body is a JobSpec, or `{"preset": NAME, "overrides": {...}}`,
     sent as `application/json`. A spec over this service's limits (memory, env steps,
@@ -78,21 +91,31 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
         problems = check_limits(spec, settings.limits())
         if problems:
             prefix = ["overrides"] if "preset" in body else []  # a valid spec came from a JSON object
-            raise Invalid([{"loc": ["body", *prefix, *loc], "msg": msg, "type": "resource_limit"}
-                           for loc, msg in problems])
+            raise Invalid(
+                [{"loc": ["body", *prefix, *loc], "msg": msg, "type": "resource_limit"} for loc, msg in problems]
+            )
     except BadRequest as exc:
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
         return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
     active = await run_in_threadpool(store.active_count)
     if active >= settings.max_active_jobs:
-        raise HTTPException(429, f"{active} jobs are queued or running, the most this service takes "
-                                 f"(MODSAT_MAX_ACTIVE_JOBS = {settings.max_active_jobs}); submit again when some "
-                                 "have ended", headers={"Retry-After": "60"})
+        raise HTTPException(
+            429,
+            f"{active} jobs are queued or running, the most this service takes "
+            f"(MODSAT_MAX_ACTIVE_JOBS = {settings.max_active_jobs}); submit again when some "
+            "have ended",
+            headers={"Retry-After": "60"},
+        )
 
     def create() -> JobDetail:
-        job_id = store.submit(spec.model_dump_json(), name=spec.name, algorithm=spec.algorithm,
-                              total_env_steps=spec.training.total_env_steps, max_attempts=settings.max_attempts)
+        job_id = store.submit(
+            spec.model_dump_json(),
+            name=spec.name,
+            algorithm=spec.algorithm,
+            total_env_steps=spec.training.total_env_steps,
+            max_attempts=settings.max_attempts,
+        )
         job = _detail(store, job_id)
         assert job is not None  # the row was just inserted
         return job
@@ -107,16 +130,28 @@ def list_jobs(
     status: Annotated[list[JobStatus] | None, Query(description="Only jobs in these states (repeatable).")] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
-    before_id: Annotated[int | None, Query(ge=1, le=2**63 - 1, description=(
-        "Only jobs with a smaller id: the cursor `next_before_id` of the previous page."))] = None,
+    before_id: Annotated[
+        int | None,
+        Query(
+            ge=1,
+            le=2**63 - 1,
+            description=("Only jobs with a smaller id: the cursor `next_before_id` of the previous page."),
+        ),
+    ] = None,
 ) -> JobList:
     """Jobs, newest first, one page at a time (by `offset`, or by the `before_id` cursor)."""
     statuses: list[str] | None = list(status) if status else None
     total, rows = store.list_jobs(statuses=statuses, limit=limit + 1, offset=offset, before_id=before_id)
     more, rows = len(rows) > limit, rows[:limit]
     nxt = offset + len(rows) if before_id is None and offset + len(rows) < total else None
-    return JobList(total=total, limit=limit, offset=offset, next_offset=nxt,
-                   next_before_id=rows[-1]["id"] if more and rows else None, items=[job_summary(r) for r in rows])
+    return JobList(
+        total=total,
+        limit=limit,
+        offset=offset,
+        next_offset=nxt,
+        next_before_id=rows[-1]["id"] if more and rows else None,
+        items=[job_summary(r) for r in rows],
+    )
 
 
 @router.get("/{job_id}", response_model=JobDetail, responses=_ERRORS)
@@ -141,8 +176,14 @@ def get_metrics(
         raise _unknown(job_id)
     rows = store.metrics_after(job_id, after, limit + 1)  # one more row tells whether more remain
     more, rows = len(rows) > limit, rows[:limit]
-    return MetricsPage(job_id=job_id, status=state[0], after=after, last_seq=rows[-1]["seq"] if rows else after,
-                       more=more, items=[metrics_point(r) for r in rows])
+    return MetricsPage(
+        job_id=job_id,
+        status=state[0],
+        after=after,
+        last_seq=rows[-1]["seq"] if rows else after,
+        more=more,
+        items=[metrics_point(r) for r in rows],
+    )
 
 
 def _sse(event: str, data: str, event_id: int | None = None) -> str:
@@ -150,8 +191,10 @@ def _sse(event: str, data: str, event_id: int | None = None) -> str:
     return f"{head}event: {event}\ndata: {data}\n\n"
 
 
-@router.get("/{job_id}/events", responses={**_ERRORS, 200: {"content": {"text/event-stream": {}},
-                                                               "description": "Server-sent events"}})
+@router.get(
+    "/{job_id}/events",
+    responses={**_ERRORS, 200: {"content": {"text/event-stream": {}}, "description": "Server-sent events"}},
+)
 async def job_events(
     job_id: int,
     request: Request,
@@ -203,14 +246,22 @@ async def job_events(
                 return
             await asyncio.sleep(settings.sse_poll_s)
 
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})
+    return StreamingResponse(
+        stream(), media_type="text/event-stream", headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
+    )
 
 
-@router.post("/{job_id}/cancel", response_model=CancelResult, dependencies=[WriteAccess],
-             responses={**_ERRORS, 202: {"description": "Running job: the worker stops it"},
-                        401: {"description": "Missing or wrong bearer token"},
-                        409: {"description": "The job has already ended"}})
+@router.post(
+    "/{job_id}/cancel",
+    response_model=CancelResult,
+    dependencies=[WriteAccess],
+    responses={
+        **_ERRORS,
+        202: {"description": "Running job: the worker stops it"},
+        401: {"description": "Missing or wrong bearer token"},
+        409: {"description": "The job has already ended"},
+    },
+)
 def cancel_job(job_id: int, store: StoreDep, response: Response) -> CancelResult:
     """Cancel a queued job (at once) or a running one (its worker stops it within a heartbeat)."""
     outcome = store.request_cancel(job_id)
@@ -224,14 +275,20 @@ def cancel_job(job_id: int, store: StoreDep, response: Response) -> CancelResult
     }
     if outcome == "requested":
         response.status_code = 202
-    return CancelResult(message=messages.get(outcome, f"job {job_id} is already cancelled"),
-                        job=_detail(store, job_id))
+    return CancelResult(message=messages.get(outcome, f"job {job_id} is already cancelled"), job=_detail(store, job_id))
 
 
-@router.delete("/{job_id}", status_code=204, dependencies=[WriteAccess],
-               responses={**_ERRORS, 204: {"description": "Deleted"},
-                          401: {"description": "Missing or wrong bearer token"},
-                          409: {"description": "The job is running; cancel it first"}})
+@router.delete(
+    "/{job_id}",
+    status_code=204,
+    dependencies=[WriteAccess],
+    responses={
+        **_ERRORS,
+        204: {"description": "Deleted"},
+        401: {"description": "Missing or wrong bearer token"},
+        409: {"description": "The job is running; cancel it first"},
+    },
+)
 def delete_job(job_id: int, store: StoreDep) -> Response:
     """Delete a job that is not running (queued or ended) with its metrics and files. A
     running job is 409: cancel it, and delete it once its worker has stopped it."""
@@ -239,8 +296,11 @@ def delete_job(job_id: int, store: StoreDep) -> Response:
     if outcome is None:
         raise _unknown(job_id)
     if outcome != "deleted":
-        raise HTTPException(409, f"job {job_id} is running; cancel it first (POST /api/jobs/{job_id}/cancel), "
-                                 "then delete it once it has stopped")
+        raise HTTPException(
+            409,
+            f"job {job_id} is running; cancel it first (POST /api/jobs/{job_id}/cancel), "
+            "then delete it once it has stopped",
+        )
     return Response(status_code=204)
 
 
@@ -256,10 +316,16 @@ def list_artifacts(job_id: int, store: StoreDep) -> list[ArtifactInfo]:
     return [artifact_info(job_id, r) for r in store.list_artifacts(job_id)]
 
 
-@router.get("/{job_id}/artifacts/{name}", responses={
-    **_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "The file"}})
-def download_artifact(job_id: int, name: str, store: StoreDep,
-                      if_none_match: Annotated[str | None, Header(include_in_schema=False)] = None) -> Response:
+@router.get(
+    "/{job_id}/artifacts/{name}",
+    responses={**_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "The file"}},
+)
+def download_artifact(
+    job_id: int,
+    name: str,
+    store: StoreDep,
+    if_none_match: Annotated[str | None, Header(include_in_schema=False)] = None,
+) -> Response:
     """Download one file. Only names in the job's list exist; anything else is 404. The ETag
     is the file's SHA-256: `If-None-Match` with it answers 304."""
     info = store.artifact_info(job_id, name)
@@ -268,12 +334,17 @@ def download_artifact(job_id: int, name: str, store: StoreDep,
             raise _unknown(job_id)
         raise HTTPException(404, f"job {job_id} has no artefact named {name!r}; see /api/jobs/{job_id}/artifacts")
     etag = f'"{info["sha256"]}"'
-    if if_none_match is not None and (if_none_match.strip() == "*" or etag in
-                                      {t.strip().removeprefix("W/") for t in if_none_match.split(",")}):
+    if if_none_match is not None and (
+        if_none_match.strip() == "*" or etag in {t.strip().removeprefix("W/") for t in if_none_match.split(",")}
+    ):
         return Response(status_code=304, headers={"ETag": etag})
     filename = _SAFE_NAME.sub("_", f"modsat-job-{job_id}-{info['name']}")
     return StreamingResponse(
-        store.iter_artifact(job_id, info["name"], int(info["size"]), info["sha256"]), media_type=info["content_type"],
-        headers={"Content-Length": str(info["size"]), "ETag": etag,
-                 "Content-Disposition": f'attachment; filename="{filename}"'},
+        store.iter_artifact(job_id, info["name"], int(info["size"]), info["sha256"]),
+        media_type=info["content_type"],
+        headers={
+            "Content-Length": str(info["size"]),
+            "ETag": etag,
+            "Content-Disposition": f'attachment; filename="{filename}"',
+        },
     )

@@ -25,13 +25,17 @@ def _json(text: str | None) -> Any:
 class PresetSubmission(BaseModel):
     """Submit a named preset, optionally with some fields changed."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
-        {"preset": "quick"},
-        {"preset": "quick", "overrides": {"seed": 3, "training": {"total_env_steps": 10000}}},
-    ]})
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"preset": "quick"},
+                {"preset": "quick", "overrides": {"seed": 3, "training": {"total_env_steps": 10000}}},
+            ]
+        },
+    )
 
-    preset: str = Field(description="Name of a preset (GET /api/presets).",
-                        json_schema_extra={"enum": list(PRESETS)})
+    preset: str = Field(description="Name of a preset (GET /api/presets).", json_schema_extra={"enum": list(PRESETS)})
     overrides: dict[str, Any] = Field(
         default_factory=dict, description="Fields of the spec to change, nested like the spec; merged into the preset."
     )
@@ -104,8 +108,10 @@ class JobList(BaseModel):
     offset: int
     next_offset: int | None = Field(description="Offset of the next page, null on the last one.")
     next_before_id: int | None = Field(
-        None, description="Cursor of the next page (pass as `before_id`), null on the last one. Unlike offsets, "
-        "cursor pages do not shift when jobs are submitted meanwhile.")
+        None,
+        description="Cursor of the next page (pass as `before_id`), null on the last one. Unlike offsets, "
+        "cursor pages do not shift when jobs are submitted meanwhile.",
+    )
     items: list[JobSummary]
 
 
@@ -155,19 +161,36 @@ def progress_of(row: dict[str, Any]) -> Progress:
     steps = int(row["env_steps"] or 0)
     # A finished run may stop up to num_envs - 1 steps short of its budget (whole batches).
     fraction = 1.0 if row.get("status") == "succeeded" else (min(1.0, steps / total) if total else 0.0)
-    return Progress(env_steps=steps, total_env_steps=total, fraction=fraction,
-                    phase=row["phase"], checkpoint_env_steps=row["checkpoint_env_steps"],
-                    run_seconds=round(float(row["run_seconds"] or 0.0), 3))
+    return Progress(
+        env_steps=steps,
+        total_env_steps=total,
+        fraction=fraction,
+        phase=row["phase"],
+        checkpoint_env_steps=row["checkpoint_env_steps"],
+        run_seconds=round(float(row["run_seconds"] or 0.0), 3),
+    )
 
 
 def job_summary(row: dict[str, Any]) -> JobSummary:
     return JobSummary(
-        id=row["id"], name=row["name"], algorithm=row["algorithm"], status=row["status"],
-        created_at=_time(row["created_at"]), updated_at=_time(row["updated_at"]),
-        started_at=_time(row["started_at"]), finished_at=_time(row["finished_at"]), attempt=row["attempt"],
-        failures=row["failures"], max_attempts=row["max_attempts"], cancel_requested=bool(row["cancel_requested"]),
-        worker_id=row["worker_id"], lease_expires_at=_time(row["lease_expires_at"]), progress=progress_of(row),
-        last_eval=_json(row["last_eval"]), error=row["error"], url=f"/api/jobs/{row['id']}",
+        id=row["id"],
+        name=row["name"],
+        algorithm=row["algorithm"],
+        status=row["status"],
+        created_at=_time(row["created_at"]),
+        updated_at=_time(row["updated_at"]),
+        started_at=_time(row["started_at"]),
+        finished_at=_time(row["finished_at"]),
+        attempt=row["attempt"],
+        failures=row["failures"],
+        max_attempts=row["max_attempts"],
+        cancel_requested=bool(row["cancel_requested"]),
+        worker_id=row["worker_id"],
+        lease_expires_at=_time(row["lease_expires_at"]),
+        progress=progress_of(row),
+        last_eval=_json(row["last_eval"]),
+        error=row["error"],
+        url=f"/api/jobs/{row['id']}",
     )
 
 
@@ -184,17 +207,33 @@ def job_detail(row: dict[str, Any], latest: dict[str, Any] | None, attempts: lis
     base = job_summary(row).model_dump()
     jid = row["id"]
     return JobDetail(
-        **base, spec=json.loads(row["spec"]), latest_metrics=metrics_point(latest) if latest else None,
-        evaluation=_json(row["summary"]), error_detail=row["error_detail"],
-        attempts=[AttemptInfo(**{**a, "started_at": _time(a["started_at"]), "ended_at": _time(a["ended_at"])})
-                  for a in attempts],
-        links={"self": f"/api/jobs/{jid}", "metrics": f"/api/jobs/{jid}/metrics",
-               "events": f"/api/jobs/{jid}/events", "artifacts": f"/api/jobs/{jid}/artifacts",
-               "cancel": f"/api/jobs/{jid}/cancel"},
+        **base,
+        spec=json.loads(row["spec"]),
+        latest_metrics=metrics_point(latest) if latest else None,
+        evaluation=_json(row["summary"]),
+        error_detail=row["error_detail"],
+        attempts=[
+            AttemptInfo(**{**a, "started_at": _time(a["started_at"]), "ended_at": _time(a["ended_at"])})
+            for a in attempts
+        ],
+        links={
+            "self": f"/api/jobs/{jid}",
+            "metrics": f"/api/jobs/{jid}/metrics",
+            "events": f"/api/jobs/{jid}/events",
+            "artifacts": f"/api/jobs/{jid}/artifacts",
+            "cancel": f"/api/jobs/{jid}/cancel",
+        },
     )
 
 
 def artifact_info(job_id: int, row: dict[str, Any]) -> ArtifactInfo:
-    return ArtifactInfo(name=row["name"], kind=row["kind"], size=row["size"], sha256=row["sha256"],
-                        content_type=row["content_type"], attempt=row["attempt"], created_at=_time(row["created_at"]),
-                        url=f"/api/jobs/{job_id}/artifacts/{row['name']}")
+    return ArtifactInfo(
+        name=row["name"],
+        kind=row["kind"],
+        size=row["size"],
+        sha256=row["sha256"],
+        content_type=row["content_type"],
+        attempt=row["attempt"],
+        created_at=_time(row["created_at"]),
+        url=f"/api/jobs/{job_id}/artifacts/{row['name']}",
+    )

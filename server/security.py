@@ -46,9 +46,15 @@ class CrossSiteGuard:
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
         host = headers.get("host", "")
         if not host_allowed(host, self.host_names):
-            await self._reject(scope, send, 400, (
-                f"this server does not answer to the host name {host[:100]!r}; "
-                "add it to MODSAT_ALLOWED_HOSTS if it is really this server"))
+            await self._reject(
+                scope,
+                send,
+                400,
+                (
+                    f"this server does not answer to the host name {host[:100]!r}; "
+                    "add it to MODSAT_ALLOWED_HOSTS if it is really this server"
+                ),
+            )
             return
         origin = headers.get("origin")
         if scope["type"] == "websocket":
@@ -60,9 +66,15 @@ class CrossSiteGuard:
             cross_site = headers.get("sec-fetch-site", "").lower() == "cross-site"
             foreign = origin is not None and origin.strip().rstrip("/").lower() not in ({own} | self.origins)
             if foreign or (cross_site and origin is None):
-                await self._reject(scope, send, 403, (
-                    f"a write from a page of another origin ({(origin or 'cross-site')[:100]}) is refused; "
-                    "list that origin in MODSAT_ALLOWED_ORIGINS if it is yours"))
+                await self._reject(
+                    scope,
+                    send,
+                    403,
+                    (
+                        f"a write from a page of another origin ({(origin or 'cross-site')[:100]}) is refused; "
+                        "list that origin in MODSAT_ALLOWED_ORIGINS if it is yours"
+                    ),
+                )
                 return
         await self.app(scope, receive, send)
 

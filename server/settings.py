@@ -27,7 +27,9 @@ class ServerSettings(WorkerSettings):
     )
     viewer: bool = Field(True, description="Run the live 3D viewer (viser) inside the API process.")
     viewer_port: int = Field(
-        8080, ge=0, le=65535,
+        8080,
+        ge=0,
+        le=65535,
         description="Port of the live 3D viewer; 0 = any free port. A busy port moves it up (see GET /api/viewer).",
     )
     allowed_hosts: str = Field(
@@ -44,7 +46,8 @@ class ServerSettings(WorkerSettings):
         100, ge=1, le=1_000_000, description="Queued plus running jobs; a submission beyond it is 429."
     )
     web_dir: str | None = Field(
-        None, description="Directory of the web UI's files (default: web/static/, installed with the package).")
+        None, description="Directory of the web UI's files (default: web/static/, installed with the package)."
+    )
 
     @field_validator("api_token")
     @classmethod

@@ -46,14 +46,15 @@ def merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
 
 def decode_json(raw: bytes) -> Any:
     if not raw.strip():
-        raise BadRequest("the request body is empty; send a JobSpec or {\"preset\": NAME} as JSON")
+        raise BadRequest('the request body is empty; send a JobSpec or {"preset": NAME} as JSON')
     try:
         return json.loads(raw)
     except UnicodeDecodeError:
         raise BadRequest("the request body is not UTF-8 text") from None
     except json.JSONDecodeError as exc:
-        raise BadRequest(f"the request body is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
-                         ) from None
+        raise BadRequest(
+            f"the request body is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+        ) from None
     except (ValueError, RecursionError) as exc:  # e.g. an integer with too many digits, nesting too deep
         raise BadRequest(f"the request body is not usable JSON: {type(exc).__name__}") from None
 
@@ -61,24 +62,39 @@ def decode_json(raw: bytes) -> Any:
 def spec_from_body(body: Any) -> JobSpec:
     """Validate a decoded body; raises :class:`Invalid` with one error per problem."""
     if not isinstance(body, dict):
-        raise Invalid([_error(
-            [], 'body: expected a JSON object: a JobSpec, or {"preset": NAME, "overrides": {...}}', "dict_type")])
+        raise Invalid(
+            [
+                _error(
+                    [], 'body: expected a JSON object: a JobSpec, or {"preset": NAME, "overrides": {...}}', "dict_type"
+                )
+            ]
+        )
     prefix: list[Any] = []
     if "preset" in body:
         extra = sorted(set(body) - {"preset", "overrides"})
         if extra:
-            raise Invalid([_error([k], f"{k}: unknown field next to 'preset'; a preset submission has only "
-                                       f"'preset' and 'overrides' (put spec fields inside 'overrides')",
-                                  "extra_forbidden") for k in extra])
+            raise Invalid(
+                [
+                    _error(
+                        [k],
+                        f"{k}: unknown field next to 'preset'; a preset submission has only "
+                        f"'preset' and 'overrides' (put spec fields inside 'overrides')",
+                        "extra_forbidden",
+                    )
+                    for k in extra
+                ]
+            )
         name, overrides = body["preset"], body.get("overrides", {})
         if not isinstance(name, str) or name not in PRESETS:
-            raise Invalid([_error(["preset"], f"preset: unknown preset {name!r}; known: {', '.join(PRESETS)}",
-                                  "literal_error")])
+            raise Invalid(
+                [_error(["preset"], f"preset: unknown preset {name!r}; known: {', '.join(PRESETS)}", "literal_error")]
+            )
         if overrides is None:
             overrides = {}
         if not isinstance(overrides, dict):
-            raise Invalid([_error(["overrides"], "overrides: expected an object of spec fields, e.g. {\"seed\": 3}",
-                                  "dict_type")])
+            raise Invalid(
+                [_error(["overrides"], 'overrides: expected an object of spec fields, e.g. {"seed": 3}', "dict_type")]
+            )
         body = merge(PRESETS[name].model_dump(mode="json"), overrides)
         prefix = ["overrides"]
     try:
@@ -94,6 +110,7 @@ def spec_from_body(body: Any) -> JobSpec:
         log.exception("spec validation raised unexpectedly")
         raise Invalid([_error([], f"body: the spec could not be validated: {exc}")]) from None
     if spec.name is not None and "\x00" in spec.name:  # stored as a text column: PostgreSQL refuses NUL
-        raise Invalid([_error([*prefix, "name"], "name: must not contain the NUL character (\\u0000)",
-                              "string_pattern_mismatch")])
+        raise Invalid(
+            [_error([*prefix, "name"], "name: must not contain the NUL character (\\u0000)", "string_pattern_mismatch")]
+        )
     return spec

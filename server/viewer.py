@@ -60,8 +60,13 @@ class StoreRuns:
         files = {n: self.store.read_artifact(job_id, n) for n in (*NEEDED, "evaluation.json", "spec.json")}
         if any(files[n] is None for n in NEEDED):
             raise KeyError(key)
-        return RunData.from_json(files["design.json"], files["trajectories.json"], evaluation=files["evaluation.json"],
-                                 spec=files["spec.json"], title=f"job {job_id} {row['name'] or ''}".strip())
+        return RunData.from_json(
+            files["design.json"],
+            files["trajectories.json"],
+            evaluation=files["evaluation.json"],
+            spec=files["spec.json"],
+            title=f"job {job_id} {row['name'] or ''}".strip(),
+        )
 
     def defaults(self, choices: list[tuple[str, str]]) -> tuple[str | None, str | None]:
         return (choices[0][0] if choices else None, None)
@@ -74,8 +79,9 @@ def start_viewer(settings: ServerSettings, store):
     from web.live import ViewerApp
 
     try:
-        app = ViewerApp(StoreRuns(store), host=settings.host, port=settings.viewer_port,
-                        allowed_hosts=settings.host_names())
+        app = ViewerApp(
+            StoreRuns(store), host=settings.host, port=settings.viewer_port, allowed_hosts=settings.host_names()
+        )
     except Exception:  # the API works without the viewer; say why it is missing
         log.exception("the 3D viewer could not start; the API runs without it")
         return None
@@ -100,8 +106,12 @@ def viewer_router() -> APIRouter:
         from web.recording import RECORDING_NAME
 
         v = getattr(request.app.state, "viewer", None)
-        return ViewerInfo(enabled=v is not None, port=v.port if v is not None else None, client="/viser-client/",
-                          recording=RECORDING_NAME)
+        return ViewerInfo(
+            enabled=v is not None,
+            port=v.port if v is not None else None,
+            client="/viser-client/",
+            recording=RECORDING_NAME,
+        )
 
     return r
 

@@ -78,8 +78,11 @@ def _series(ep: Episode | None, times: np.ndarray, what: str) -> np.ndarray:
     return v[ep.indices_at(times + ep.t_s[0])].astype(np.float64)
 
 
-PLOTS = (("error", "error angle (deg)"), ("rate", "body rate |omega| (rad/s)"),
-         ("momentum", "wheel momentum |h| (N m s)"))
+PLOTS = (
+    ("error", "error angle (deg)"),
+    ("rate", "body rate |omega| (rad/s)"),
+    ("momentum", "wheel momentum |h| (N m s)"),
+)
 
 
 class Session:
@@ -105,12 +108,16 @@ class Session:
         self.title = gui.add_markdown("**modsat viewer**")
         with gui.add_folder("Runs"):
             self.run_dd = gui.add_dropdown("Run", [NONE], hint="A finished run: its satellite and slews.")
-            self.cmp_dd = gui.add_dropdown("Compare with", [NONE],
-                                           hint="A second run side by side (e.g. RL vs GA), same slews.")
+            self.cmp_dd = gui.add_dropdown(
+                "Compare with", [NONE], hint="A second run side by side (e.g. RL vs GA), same slews."
+            )
             self.refresh_btn = gui.add_button("Refresh list", hint="Look for newly finished runs.")
         with gui.add_folder("Playback"):
-            self.ctrl_dd = gui.add_dropdown("Controller", list(CONTROLLERS.values()),
-                                            hint="The trained policy, or the PD baseline on the same design.")
+            self.ctrl_dd = gui.add_dropdown(
+                "Controller",
+                list(CONTROLLERS.values()),
+                hint="The trained policy, or the PD baseline on the same design.",
+            )
             self.ep_dd = gui.add_dropdown("Slew", ["-"], hint="A recorded evaluation slew (same seeds in every run).")
             self.time_sl = gui.add_slider("Time (s)", min=0.0, max=1.0, step=0.01, initial_value=0.0)
             self.play_btn = gui.add_button("Play", hint="Play / pause the slew.")
@@ -118,9 +125,16 @@ class Session:
             self.readout = gui.add_markdown("")
         with gui.add_folder("Time plots"):
             empty = (np.zeros(2), np.zeros(2))
-            self.plots = {key: gui.add_uplot(data=empty, series=({"label": "t (s)"}, {"label": "-"}), title=title,
-                                             scales={"x": {"time": False}}, aspect=2.2)
-                          for key, title in PLOTS}
+            self.plots = {
+                key: gui.add_uplot(
+                    data=empty,
+                    series=({"label": "t (s)"}, {"label": "-"}),
+                    title=title,
+                    scales={"x": {"time": False}},
+                    aspect=2.2,
+                )
+                for key, title in PLOTS
+            }
         with gui.add_folder("Design and evaluation"):
             self.info = gui.add_markdown("")
 
@@ -239,7 +253,7 @@ class Session:
                 scene.remove_by_name("/B")
             if not self.runs:
                 scene.remove_by_name("/A")
-            self.client.camera.position = lay_out(scene, ["/A", "/B"][:len(self.sats)], self.sats, min_radius=1.5)
+            self.client.camera.position = lay_out(scene, ["/A", "/B"][: len(self.sats)], self.sats, min_radius=1.5)
             self.client.camera.look_at = (0.0, 0.0, 0.0)
         self.title.content = self._title()
         self.info.content = self._info()
@@ -251,18 +265,25 @@ class Session:
         return f"**modsat viewer**: {names}"
 
     def _info(self) -> str:
-        lines = ["Grey cubes: structure modules; orange cubes: reaction-wheel actuators. "
-                 "Thick axes: body frame (x red, y green, z blue); faint copy: target attitude.", ""]
+        lines = [
+            "Grey cubes: structure modules; orange cubes: reaction-wheel actuators. "
+            "Thick axes: body frame (x red, y green, z blue); faint copy: target attitude.",
+            "",
+        ]
         for r in self.runs:
             mass = r.design.mass_kg
-            lines.append(f"**{r.short_algorithm}: {r.title}**: {r.modules} modules, {r.actuators} actuators"
-                         + (f", {mass:.1f} kg" if mass is not None else ""))
+            lines.append(
+                f"**{r.short_algorithm}: {r.title}**: {r.modules} modules, {r.actuators} actuators"
+                + (f", {mass:.1f} kg" if mass is not None else "")
+            )
             ev = r.evaluation
             for c, name in ((ev and ev.policy, "policy"), (ev and ev.pd_baseline, "PD baseline")):
                 if c:
                     s = c.summary
-                    lines.append(f"- {name}: success {100 * s.success_rate:.0f} % of "
-                                 f"{s.episodes} slews, mean return {s.mean_return or 0:.1f}")
+                    lines.append(
+                        f"- {name}: success {100 * s.success_rate:.0f} % of "
+                        f"{s.episodes} slews, mean return {s.mean_return or 0:.1f}"
+                    )
             lines.append("")
         return "\n".join(lines)
 
@@ -302,9 +323,11 @@ class Session:
                 sat.body.wxyz = e.q_BN[i]
                 # Side by side, each line names its run (both could be RL, or both GA).
                 who = r.short_algorithm if len(self.runs) == 1 else f"{r.short_algorithm} {r.title}"
-                parts.append(f"**{who}** error {e.error_deg[i]:.1f} deg, rate "
-                             f"{e.rate_rad_s[i]:.3f} rad/s, wheels {e.wheel_momentum_Nms[i]:.4f} N m s"
-                             + (" (episode over)" if self.t > e.duration_s + 1e-9 else ""))
+                parts.append(
+                    f"**{who}** error {e.error_deg[i]:.1f} deg, rate "
+                    f"{e.rate_rad_s[i]:.3f} rad/s, wheels {e.wheel_momentum_Nms[i]:.4f} N m s"
+                    + (" (episode over)" if self.t > e.duration_s + 1e-9 else "")
+                )
         self.readout.content = f"t = {self.t:.2f} s  \n" + "  \n".join(parts)
 
     # ------------------------------------------------------------------ playback
@@ -328,8 +351,16 @@ class Session:
 class ViewerApp:
     """A viser server with one :class:`Session` per browser tab. Runs in viser's threads."""
 
-    def __init__(self, source: RunSource, *, host: str = "127.0.0.1", port: int = 8080,
-                 label: str = "modsat viewer", cache_size: int = 8, allowed_hosts: set[str] | str | None = ""):
+    def __init__(
+        self,
+        source: RunSource,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        label: str = "modsat viewer",
+        cache_size: int = 8,
+        allowed_hosts: set[str] | str | None = "",
+    ):
         """``allowed_hosts``: the host names the websocket answers to, and whose pages may open
         it (origin.py); a string = extra names next to the loopback ones and ``host``."""
         import viser

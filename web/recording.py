@@ -41,9 +41,18 @@ def _frames(episodes: list, max_fps: float) -> tuple[np.ndarray, float]:
     return np.arange(0.0, end + 1e-9, period), period
 
 
-def recording_bytes(design_json, trajectories_json, *, spec_json=None, title: str | None = None,
-                    controllers: tuple[str, ...] = tuple(CONTROLLERS), max_episodes: int = 3,
-                    speed: float = 1.0, pause_s: float = 1.0, max_fps: float = MAX_FPS) -> bytes:
+def recording_bytes(
+    design_json,
+    trajectories_json,
+    *,
+    spec_json=None,
+    title: str | None = None,
+    controllers: tuple[str, ...] = tuple(CONTROLLERS),
+    max_episodes: int = 3,
+    speed: float = 1.0,
+    pause_s: float = 1.0,
+    max_fps: float = MAX_FPS,
+) -> bytes:
     """Bytes of a ``.viser`` file replaying the recorded evaluation slews of a run.
 
     Args:
@@ -103,8 +112,10 @@ def recording_html(viser_bytes: bytes, dark_mode: bool = False) -> str:
 
     client = (Path(viser.__file__).resolve().parent / "client" / "build" / "index.html").read_text()
     data = base64.b64encode(viser_bytes).decode("ascii")
-    inject = (f'<script>window.__VISER_EMBED_DATA__="{data}";'
-              f"window.__VISER_EMBED_CONFIG__={{darkMode:{'true' if dark_mode else 'false'}}};</script>")
+    inject = (
+        f'<script>window.__VISER_EMBED_DATA__="{data}";'
+        f"window.__VISER_EMBED_CONFIG__={{darkMode:{'true' if dark_mode else 'false'}}};</script>"
+    )
     head_end = client.index("</head>")
     return client[:head_end] + inject + client[head_end:]
 
@@ -116,8 +127,9 @@ def add_recording(files: MutableMapping[str, bytes]) -> bool:
     if "design.json" not in files or "trajectories.json" not in files:
         return False
     try:
-        files[RECORDING_NAME] = recording_bytes(files["design.json"], files["trajectories.json"],
-                                                spec_json=files.get("spec.json"))
+        files[RECORDING_NAME] = recording_bytes(
+            files["design.json"], files["trajectories.json"], spec_json=files.get("spec.json")
+        )
         return True
     except Exception:  # see the docstring
         log.exception("could not make the %s recording", RECORDING_NAME)

@@ -47,10 +47,15 @@ class Episode:
         def arr(v: list | None, width: int) -> np.ndarray:
             return np.zeros((n, width)) if v is None else np.asarray(v, dtype=np.float64).reshape(n, width)
 
-        return cls(t_s=t, q_BN=arr(r.q_BN, 4), omega_B=arr(r.omega_B, 3), h_B=arr(r.h_B, 3),
-                   error_deg=np.zeros(n) if r.error_deg is None else np.asarray(r.error_deg, dtype=np.float64),
-                   q_TN=np.asarray(r.q_TN or (1.0, 0.0, 0.0, 0.0), dtype=np.float64),
-                   metrics=(r.metrics or EpisodeMetrics()).to_dict())
+        return cls(
+            t_s=t,
+            q_BN=arr(r.q_BN, 4),
+            omega_B=arr(r.omega_B, 3),
+            h_B=arr(r.h_B, 3),
+            error_deg=np.zeros(n) if r.error_deg is None else np.asarray(r.error_deg, dtype=np.float64),
+            q_TN=np.asarray(r.q_TN or (1.0, 0.0, 0.0, 0.0), dtype=np.float64),
+            metrics=(r.metrics or EpisodeMetrics()).to_dict(),
+        )
 
     @property
     def duration_s(self) -> float:
@@ -131,8 +136,13 @@ class RunData:
             f = p / name
             return f.read_bytes() if f.is_file() else None
 
-        return cls.from_json((p / "design.json").read_bytes(), (p / "trajectories.json").read_bytes(),
-                             evaluation=opt("evaluation.json"), spec=opt("spec.json"), title=title or p.name)
+        return cls.from_json(
+            (p / "design.json").read_bytes(),
+            (p / "trajectories.json").read_bytes(),
+            evaluation=opt("evaluation.json"),
+            spec=opt("spec.json"),
+            title=title or p.name,
+        )
 
     @property
     def algorithm(self) -> str:

@@ -39,10 +39,26 @@ EDGE_SRGB = (35, 35, 35)
 GHOST_OPACITY = 0.2
 
 #: Unit cube centred at the origin: 8 vertices, 12 outward (counter-clockwise) triangles.
-CUBE_VERTICES = np.array([[x, y, z] for z in (-0.5, 0.5) for y in (-0.5, 0.5) for x in (-0.5, 0.5)],
-                         dtype=np.float32)[[0, 1, 3, 2, 4, 5, 7, 6]]
-CUBE_FACES = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
-                       [3, 7, 6], [3, 6, 2], [0, 4, 7], [0, 7, 3], [1, 2, 6], [1, 6, 5]], dtype=np.uint32)
+CUBE_VERTICES = np.array([[x, y, z] for z in (-0.5, 0.5) for y in (-0.5, 0.5) for x in (-0.5, 0.5)], dtype=np.float32)[
+    [0, 1, 3, 2, 4, 5, 7, 6]
+]
+CUBE_FACES = np.array(
+    [
+        [0, 2, 1],
+        [0, 3, 2],
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [3, 7, 6],
+        [3, 6, 2],
+        [0, 4, 7],
+        [0, 7, 3],
+        [1, 2, 6],
+        [1, 6, 5],
+    ],
+    dtype=np.uint32,
+)
 _CUBE_EDGES = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
 
 
@@ -73,8 +89,9 @@ class Voxels:
     @property
     def colors_linear(self) -> np.ndarray:
         """(M, 3) linear RGB in [0, 1]."""
-        table = np.stack([srgb_to_linear(STRUCTURE_SRGB), srgb_to_linear(STRUCTURE_SRGB),
-                          srgb_to_linear(ACTUATOR_SRGB)])
+        table = np.stack(
+            [srgb_to_linear(STRUCTURE_SRGB), srgb_to_linear(STRUCTURE_SRGB), srgb_to_linear(ACTUATOR_SRGB)]
+        )
         return table[np.clip(self.types, 0, 2)]
 
     @property
@@ -110,8 +127,16 @@ class SatelliteHandles:
             self.target.wxyz = np.asarray(q_TN, dtype=np.float64)
 
 
-def draw_satellite(scene, prefix: str, grid, *, position=(0.0, 0.0, 0.0), label: str | None = None,
-                   q_BN=(1.0, 0.0, 0.0, 0.0), q_TN=(1.0, 0.0, 0.0, 0.0)) -> SatelliteHandles:
+def draw_satellite(
+    scene,
+    prefix: str,
+    grid,
+    *,
+    position=(0.0, 0.0, 0.0),
+    label: str | None = None,
+    q_BN=(1.0, 0.0, 0.0, 0.0),
+    q_TN=(1.0, 0.0, 0.0, 0.0),
+) -> SatelliteHandles:
     """Draw (or redraw, same names) the satellite of ``grid`` (N, N, N) under ``prefix``.
 
     ``scene`` is a viser ``SceneApi`` (``server.scene`` or ``client.scene``)."""
@@ -119,10 +144,16 @@ def draw_satellite(scene, prefix: str, grid, *, position=(0.0, 0.0, 0.0), label:
     r = vox.radius
     axes = max(1.5, r + 0.8)
     scene.add_frame(prefix, show_axes=False, position=tuple(float(v) for v in position))
-    body = scene.add_frame(f"{prefix}/body", axes_length=axes, axes_radius=0.05, origin_radius=0.08,
-                           wxyz=tuple(float(v) for v in q_BN))
-    target = scene.add_frame(f"{prefix}/target", axes_length=axes * 0.8, axes_radius=0.025, origin_radius=0.04,
-                             wxyz=tuple(float(v) for v in q_TN))
+    body = scene.add_frame(
+        f"{prefix}/body", axes_length=axes, axes_radius=0.05, origin_radius=0.08, wxyz=tuple(float(v) for v in q_BN)
+    )
+    target = scene.add_frame(
+        f"{prefix}/target",
+        axes_length=axes * 0.8,
+        axes_radius=0.025,
+        origin_radius=0.04,
+        wxyz=tuple(float(v) for v in q_TN),
+    )
     if len(vox.positions):
         M = len(vox.positions)
         ident = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (M, 1))
@@ -132,23 +163,43 @@ def draw_satellite(scene, prefix: str, grid, *, position=(0.0, 0.0, 0.0), label:
         act = vox.types == ACTUATOR
         for name, sel, opacity in (("voxels", act, None), ("structure", ~act, STRUCTURE_OPACITY)):
             if sel.any():
-                scene.add_batched_meshes_simple(f"{prefix}/body/{name}", CUBE_VERTICES, CUBE_FACES, ident[sel],
-                                                vox.positions[sel], batched_colors=colors[sel], flat_shading=True,
-                                                opacity=opacity)
+                scene.add_batched_meshes_simple(
+                    f"{prefix}/body/{name}",
+                    CUBE_VERTICES,
+                    CUBE_FACES,
+                    ident[sel],
+                    vox.positions[sel],
+                    batched_colors=colors[sel],
+                    flat_shading=True,
+                    opacity=opacity,
+                )
             else:
                 scene.remove_by_name(f"{prefix}/body/{name}")
-        scene.add_line_segments(f"{prefix}/body/edges", vox.edge_segments(), srgb_to_linear(EDGE_SRGB),
-                                thickness=0.035)
-        scene.add_batched_meshes_simple(f"{prefix}/target/ghost", CUBE_VERTICES * 1.02, CUBE_FACES, ident,
-                                        vox.positions, batched_colors=colors, flat_shading=True,
-                                        opacity=GHOST_OPACITY, cast_shadow=False, receive_shadow=False)
+        scene.add_line_segments(f"{prefix}/body/edges", vox.edge_segments(), srgb_to_linear(EDGE_SRGB), thickness=0.035)
+        scene.add_batched_meshes_simple(
+            f"{prefix}/target/ghost",
+            CUBE_VERTICES * 1.02,
+            CUBE_FACES,
+            ident,
+            vox.positions,
+            batched_colors=colors,
+            flat_shading=True,
+            opacity=GHOST_OPACITY,
+            cast_shadow=False,
+            receive_shadow=False,
+        )
     else:  # an empty design: nothing to draw but its name
-        for name in (f"{prefix}/body/voxels", f"{prefix}/body/structure", f"{prefix}/body/edges",
-                     f"{prefix}/target/ghost"):
+        for name in (
+            f"{prefix}/body/voxels",
+            f"{prefix}/body/structure",
+            f"{prefix}/body/edges",
+            f"{prefix}/target/ghost",
+        ):
             scene.remove_by_name(name)
     if label:
-        scene.add_label(f"{prefix}/label", label, position=(0.0, 0.0, r + 0.6), anchor="bottom-center",
-                        font_screen_scale=1.1)
+        scene.add_label(
+            f"{prefix}/label", label, position=(0.0, 0.0, r + 0.6), anchor="bottom-center", font_screen_scale=1.1
+        )
     else:
         scene.remove_by_name(f"{prefix}/label")
     return SatelliteHandles(body=body, target=target, radius=r)
@@ -168,8 +219,9 @@ def side_by_side_positions(radii: list[float]) -> list[tuple[float, float, float
     return out
 
 
-def lay_out(scene, prefixes: list[str], sats: list[SatelliteHandles], *, min_radius: float = 0.0
-            ) -> tuple[float, float, float]:
+def lay_out(
+    scene, prefixes: list[str], sats: list[SatelliteHandles], *, min_radius: float = 0.0
+) -> tuple[float, float, float]:
     """Place the satellites drawn under ``prefixes`` side by side over a floor grid; returns a
     camera position that frames them. ``min_radius`` sizes the floor for tiny (or no) satellites."""
     radii = [s.radius for s in sats]
@@ -178,8 +230,14 @@ def lay_out(scene, prefixes: list[str], sats: list[SatelliteHandles], *, min_rad
         scene.add_frame(prefix, show_axes=False, position=pos)
     biggest = max([*radii, min_radius])
     extent = max([abs(p[1]) for p in places] + [0.0]) + biggest
-    scene.add_grid("/floor", width=2 * extent + 4, height=2 * extent + 4, cell_size=1.0, section_size=5.0,
-                   position=(0.0, 0.0, -biggest - 0.5))
+    scene.add_grid(
+        "/floor",
+        width=2 * extent + 4,
+        height=2 * extent + 4,
+        cell_size=1.0,
+        section_size=5.0,
+        position=(0.0, 0.0, -biggest - 0.5),
+    )
     return camera_position(extent)
 
 

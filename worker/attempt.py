@@ -40,7 +40,8 @@ class _Flags:
 def _transient(exc: SQLAlchemyError) -> bool:
     """A database outage (worth retrying), not a statement the database will always refuse."""
     return isinstance(exc, (OperationalError, InterfaceError, PoolTimeoutError)) or (
-        isinstance(exc, DBAPIError) and exc.connection_invalidated)
+        isinstance(exc, DBAPIError) and exc.connection_invalidated
+    )
 
 
 def _exit_text(code: int | None) -> str:
@@ -62,8 +63,15 @@ class Attempt:
     ``shutdown`` is the worker's stop request: the training is asked to stop (it checkpoints),
     and the job goes back to the queue without counting as a failure."""
 
-    def __init__(self, store: JobStore, claim: Claim, settings: WorkerSettings, worker_id: str,
-                 shutdown: threading.Event, hurry: threading.Event):
+    def __init__(
+        self,
+        store: JobStore,
+        claim: Claim,
+        settings: WorkerSettings,
+        worker_id: str,
+        shutdown: threading.Event,
+        hurry: threading.Event,
+    ):
         self.store, self.claim, self.s, self.worker_id = store, claim, settings, worker_id
         self.shutdown, self.hurry = shutdown, hurry
         self.flags = _Flags()
@@ -78,8 +86,11 @@ class Attempt:
             try:
                 beat = self.store.heartbeat(self.claim, lease_s=self.s.lease_s)
                 if not beat.alive:
-                    log.warning("job %s attempt %s: lease lost; stopping without publishing",
-                                self.claim.job_id, self.claim.attempt)
+                    log.warning(
+                        "job %s attempt %s: lease lost; stopping without publishing",
+                        self.claim.job_id,
+                        self.claim.attempt,
+                    )
                     self.flags.lost.set()
                     return
                 if beat.cancel_requested:
@@ -106,8 +117,9 @@ class Attempt:
             return "failed"
         problems = check_limits(spec, self.s.limits())
         if problems:  # this worker's limits may be lower than those of the API that took the job
-            self.store.fail_permanently(c, error="this worker's limits refuse the job: "
-                                        + "; ".join(msg for _, msg in problems))
+            self.store.fail_permanently(
+                c, error="this worker's limits refuse the job: " + "; ".join(msg for _, msg in problems)
+            )
             return "failed"
         # The heartbeat runs from here on: loading a large checkpoint must not cost the lease.
         beat = threading.Thread(target=self._heartbeat_loop, daemon=True, name=f"heartbeat-{c.job_id}")
@@ -117,14 +129,21 @@ class Attempt:
             checkpoint = self._load_checkpoint() if c.checkpoint_env_steps is not None else None
             if self.flags.lost.is_set():
                 return "lost"
-            log.info("job %s attempt %s: starting%s", c.job_id, c.attempt,
-                     f" from the checkpoint at {c.checkpoint_env_steps} env steps" if checkpoint else "")
+            log.info(
+                "job %s attempt %s: starting%s",
+                c.job_id,
+                c.attempt,
+                f" from the checkpoint at {c.checkpoint_env_steps} env steps" if checkpoint else "",
+            )
             ctx = mp.get_context("spawn")
             reader, writer = ctx.Pipe(duplex=False)
             stop = ctx.Event()
-            proc = ctx.Process(target=child_main, name=f"modsat-job-{c.job_id}", daemon=True,
-                               args=(writer, stop, self.s.runner, c.spec_json, checkpoint, os.getpid(),
-                                     self.s.torch_threads))
+            proc = ctx.Process(
+                target=child_main,
+                name=f"modsat-job-{c.job_id}",
+                daemon=True,
+                args=(writer, stop, self.s.runner, c.spec_json, checkpoint, os.getpid(), self.s.torch_threads),
+            )
             proc.start()
             writer.close()  # so that the child's exit shows as EOF here
             del checkpoint
@@ -149,8 +168,9 @@ class Attempt:
             except SQLAlchemyError as exc:
                 if not _transient(exc) or self.flags.lost.is_set():
                     raise
-                log.error("job %s: could not read its checkpoint (retrying in %.1f s): %s",
-                          self.claim.job_id, delay, exc)
+                log.error(
+                    "job %s: could not read its checkpoint (retrying in %.1f s): %s", self.claim.job_id, delay, exc
+                )
                 time.sleep(delay)
                 delay = min(2 * delay, 10.0)
         return self.store.load_checkpoint(self.claim.job_id)
@@ -232,8 +252,13 @@ class Attempt:
                     return "lost"
                 if not _transient(exc):
                     raise
-                log.error("job %s: could not record the end of attempt %s (retrying in %.0f s): %s",
-                          self.claim.job_id, self.claim.attempt, delay, exc)
+                log.error(
+                    "job %s: could not record the end of attempt %s (retrying in %.0f s): %s",
+                    self.claim.job_id,
+                    self.claim.attempt,
+                    delay,
+                    exc,
+                )
                 time.sleep(delay)
                 delay = min(2 * delay, 10.0)
 
@@ -243,24 +268,32 @@ class Attempt:
         if result is not None and result[0] == "result":
             info, files = result[1], result[2]
             if not info["stopped"]:
-                ok = self.store.complete(c, files=files, summary=info.get("summary"), env_steps=info["env_steps"],
-                                         attempt_seconds=dt)
+                ok = self.store.complete(
+                    c, files=files, summary=info.get("summary"), env_steps=info["env_steps"], attempt_seconds=dt
+                )
                 return "succeeded" if ok else "lost"
         elif result is not None and result[0] == "error" and not stopping and len(result) > 3 and result[3]:
-            status = self.store.fail_permanently(c, error=f"training cannot run: {result[1]}", detail=result[2],
-                                                 attempt_seconds=dt)
+            status = self.store.fail_permanently(
+                c, error=f"training cannot run: {result[1]}", detail=result[2], attempt_seconds=dt
+            )
             log.warning("job %s attempt %s: %s -> %s (no retry)", c.job_id, c.attempt, result[1], status)
             return "failed" if status else "lost"
         elif result is not None and result[0] == "error" and not stopping:
-            status = self.store.fail_attempt(c, error=f"training raised {result[1]}", detail=result[2],
-                                             outcome="failed", retry_delay_s=self.s.retry_delay_s,
-                                             attempt_seconds=dt)
+            status = self.store.fail_attempt(
+                c,
+                error=f"training raised {result[1]}",
+                detail=result[2],
+                outcome="failed",
+                retry_delay_s=self.s.retry_delay_s,
+                attempt_seconds=dt,
+            )
             log.warning("job %s attempt %s: %s -> %s", c.job_id, c.attempt, result[1], status)
             return "failed" if status else "lost"
         elif not stopping:
             error = f"the training process {_exit_text(exitcode)}"
-            status = self.store.fail_attempt(c, error=error, detail=None, outcome="crashed",
-                                             retry_delay_s=self.s.retry_delay_s, attempt_seconds=dt)
+            status = self.store.fail_attempt(
+                c, error=error, detail=None, outcome="crashed", retry_delay_s=self.s.retry_delay_s, attempt_seconds=dt
+            )
             log.warning("job %s attempt %s: %s -> %s", c.job_id, c.attempt, error, status)
             return "crashed" if status else "lost"
         # Stopped (returned early, or killed after the grace period) because of a cancel or shutdown.

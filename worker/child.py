@@ -60,8 +60,15 @@ def _plain(d: Any) -> Any:
     return json.loads(to_json(d))
 
 
-def child_main(conn, stop_event, runner_name: str, spec_json: str, checkpoint: bytes | None,
-               parent_pid: int, torch_threads: int = 1) -> None:
+def child_main(
+    conn,
+    stop_event,
+    runner_name: str,
+    spec_json: str,
+    checkpoint: bytes | None,
+    parent_pid: int,
+    torch_threads: int = 1,
+) -> None:
     """Entry point of the spawned process (see the module docstring for the protocol)."""
     # Ctrl-C in a terminal reaches the whole process group; the parent decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -88,15 +95,20 @@ def child_main(conn, stop_event, runner_name: str, spec_json: str, checkpoint: b
 
         def on_checkpoint(ckpt: dict) -> None:
             steps = ckpt.get("env_steps") if isinstance(ckpt, dict) else None
-            conn.send(("checkpoint", int(steps if steps is not None else last_steps[0]),
-                       runner.checkpoint_to_bytes(ckpt)))
+            conn.send(
+                ("checkpoint", int(steps if steps is not None else last_steps[0]), runner.checkpoint_to_bytes(ckpt))
+            )
 
-        result = runner.train(spec, on_progress=on_progress, on_checkpoint=on_checkpoint,
-                              should_stop=stop_event.is_set, checkpoint=resume)
+        result = runner.train(
+            spec, on_progress=on_progress, on_checkpoint=on_checkpoint, should_stop=stop_event.is_set, checkpoint=resume
+        )
         stopped = bool(result.stopped)
         files = {} if stopped else {str(k): bytes(v) for k, v in result.artifacts().items()}
-        info = {"stopped": stopped, "env_steps": int(result.env_steps),
-                "summary": _plain(getattr(result, "summary", None))}
+        info = {
+            "stopped": stopped,
+            "env_steps": int(result.env_steps),
+            "summary": _plain(getattr(result, "summary", None)),
+        }
         conn.send(("result", info, files))
     except BaseException as exc:  # every failure is reported, then the child exits
         try:

@@ -63,8 +63,13 @@ class Worker:
         assert self.s.heartbeat_s is not None  # WorkerSettings' validator sets it
         if not self._start(ttl):
             return 0
-        log.info("worker %s: database %s, runner %s, lease %.1f s", self.id, self.store.url_for_humans,
-                 self.s.runner, self.s.lease_s)
+        log.info(
+            "worker %s: database %s, runner %s, lease %.1f s",
+            self.id,
+            self.store.url_for_humans,
+            self.s.runner,
+            self.s.lease_s,
+        )
         done = 0
         idle_since = time.monotonic()
         next_touch = 0.0
@@ -103,19 +108,20 @@ class Worker:
         log.info("worker %s: stopped", self.id)
         return 0
 
-
     def _start(self, ttl: float) -> bool:
         """Create the tables and register; waits for a database that is not up yet."""
         wait = self.s.poll_s
         while not self.shutdown.is_set():
             try:
                 self.store.create_schema()
-                self.store.register_worker(self.id, hostname=self.hostname, pid=os.getpid(),
-                                           runner=self.s.runner, ttl_s=ttl)
+                self.store.register_worker(
+                    self.id, hostname=self.hostname, pid=os.getpid(), runner=self.s.runner, ttl_s=ttl
+                )
                 return True
             except SQLAlchemyError as exc:
-                log.error("cannot reach the job store %s (retrying in %.0f s): %s", self.store.url_for_humans,
-                          wait, exc)
+                log.error(
+                    "cannot reach the job store %s (retrying in %.0f s): %s", self.store.url_for_humans, wait, exc
+                )
                 self.shutdown.wait(wait)
                 wait = min(2 * wait, 30.0)
         return False
@@ -127,16 +133,23 @@ class Worker:
         except Exception as exc:  # a worker bug fails the attempt, not the worker
             log.exception("job %s attempt %s: worker error", claim.job_id, claim.attempt)
             try:
-                self.store.fail_attempt(claim, error=f"worker error: {type(exc).__name__}: {exc}", detail=None,
-                                        outcome="crashed", retry_delay_s=self.s.retry_delay_s, attempt_seconds=0.0)
+                self.store.fail_attempt(
+                    claim,
+                    error=f"worker error: {type(exc).__name__}: {exc}",
+                    detail=None,
+                    outcome="crashed",
+                    retry_delay_s=self.s.retry_delay_s,
+                    attempt_seconds=0.0,
+                )
             except SQLAlchemyError:
                 pass  # the lease will expire and the reaper will requeue the job
             return "worker-error"
 
 
 def settings_from_args(args: argparse.Namespace) -> WorkerSettings:
-    overrides = {k: v for k, v in {"db_url": args.db, "data_dir": args.data_dir, "runner": args.runner}.items()
-                 if v is not None}
+    overrides = {
+        k: v for k, v in {"db_url": args.db, "data_dir": args.data_dir, "runner": args.runner}.items() if v is not None
+    }
     return WorkerSettings(**overrides)
 
 

@@ -85,8 +85,9 @@ def checkpoint_from_bytes(data: bytes) -> dict:
 
 def noop(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None) -> SimpleResult:
     total = spec.training.total_env_steps
-    on_progress(ProgressRecord(env_steps=total, total_env_steps=total, updates=0, phase="training",
-                               eval=None).to_dict())
+    on_progress(
+        ProgressRecord(env_steps=total, total_env_steps=total, updates=0, phase="training", eval=None).to_dict()
+    )
     return SimpleResult(False, total, {"result.json": b'{"runner": "noop"}'}, {"runner": "noop"})
 
 
@@ -112,11 +113,19 @@ def simulated(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None)
         if env_steps >= next_eval or env_steps >= t.total_env_steps:
             point = CurvePoint(env_steps=env_steps, mean_return=env_steps / t.total_env_steps, success_rate=0.0)
             next_eval = (env_steps // t.eval_every_steps + 1) * t.eval_every_steps
-        on_progress(ProgressRecord(env_steps=env_steps, total_env_steps=t.total_env_steps, updates=env_steps // 2,
-                                   phase="training", eval=point).to_dict())
+        on_progress(
+            ProgressRecord(
+                env_steps=env_steps,
+                total_env_steps=t.total_env_steps,
+                updates=env_steps // 2,
+                phase="training",
+                eval=point,
+            ).to_dict()
+        )
         if env_steps >= next_ckpt and env_steps < t.total_env_steps:
             on_checkpoint({"env_steps": env_steps, "resumed_from": resumed_from})
             next_ckpt = (env_steps // t.checkpoint_every_steps + 1) * t.checkpoint_every_steps
     run = {"runner": "simulated", "env_steps": env_steps, "resumed_from": resumed_from, "pid": os.getpid()}
-    return SimpleResult(False, env_steps, {"run.json": json.dumps(run).encode()}, {"runner": "simulated",
-                                                                                   "resumed_from": resumed_from})
+    return SimpleResult(
+        False, env_steps, {"run.json": json.dumps(run).encode()}, {"runner": "simulated", "resumed_from": resumed_from}
+    )

@@ -47,9 +47,7 @@ class WorkerSettings(BaseSettings):
     )
     sqlite_busy_timeout_s: float = Field(30.0, gt=0, le=3600, description="How long SQLite waits for a lock.")
     lease_s: float = Field(30.0, gt=0.2, le=86_400, description="A claim is held this long without a heartbeat.")
-    heartbeat_s: float | None = Field(
-        None, gt=0, le=3600, description="Heartbeat period; unset = lease_s / 4."
-    )
+    heartbeat_s: float | None = Field(None, gt=0, le=3600, description="Heartbeat period; unset = lease_s / 4.")
     max_attempts: int = Field(
         3, ge=1, le=100, description="Failed attempts (error, crash, lost lease) before a job is `failed`."
     )
@@ -67,12 +65,16 @@ class WorkerSettings(BaseSettings):
     )
 
     torch_threads: int = Field(
-        1, ge=1, le=256,
+        1,
+        ge=1,
+        le=256,
         description="Torch threads of each training process. One per process: on a busy machine more "
         "threads measured about 20x slower, not faster (docs/service.md).",
     )
     max_job_memory_gib: float | None = Field(
-        default_factory=lambda: default_job_memory_gib(), gt=0, le=1 << 20,
+        default_factory=lambda: default_job_memory_gib(),
+        gt=0,
+        le=1 << 20,
         description="A spec whose estimated peak memory (replay buffer, update, stepping, evaluation; "
         "modsat_core/limits.py) is larger is refused (422 at the API). Default: 8, or half the machine's "
         "memory if that is less. Empty = no limit.",
@@ -81,7 +83,8 @@ class WorkerSettings(BaseSettings):
         20_000_000, ge=1, description="Largest `training.total_env_steps` of one job. Unset = no limit."
     )
     max_evaluation_steps: int | None = Field(
-        50_000_000, ge=1,
+        50_000_000,
+        ge=1,
         description="Largest number of control steps a job's evaluations (curve and final, policy and PD) "
         "may fly. Unset = no limit.",
     )
@@ -89,8 +92,9 @@ class WorkerSettings(BaseSettings):
         200_000, ge=1, description="Largest `evaluation.trajectories` x `mission.episode_steps`. Unset = no limit."
     )
 
-    @field_validator("max_job_memory_gib", "max_env_steps", "max_evaluation_steps", "max_trajectory_steps",
-                     mode="before")
+    @field_validator(
+        "max_job_memory_gib", "max_env_steps", "max_evaluation_steps", "max_trajectory_steps", mode="before"
+    )
     @classmethod
     def _empty_is_unset(cls, v: object) -> object:
         return None if isinstance(v, str) and not v.strip() else v
@@ -98,8 +102,12 @@ class WorkerSettings(BaseSettings):
     def limits(self) -> Limits:
         """The per-job limits these settings set (modsat_core.limits)."""
         mem = None if self.max_job_memory_gib is None else int(self.max_job_memory_gib * GIB)
-        return Limits(max_memory_bytes=mem, max_env_steps=self.max_env_steps,
-                      max_evaluation_steps=self.max_evaluation_steps, max_trajectory_steps=self.max_trajectory_steps)
+        return Limits(
+            max_memory_bytes=mem,
+            max_env_steps=self.max_env_steps,
+            max_evaluation_steps=self.max_evaluation_steps,
+            max_trajectory_steps=self.max_trajectory_steps,
+        )
 
     @model_validator(mode="after")
     def _resolve(self) -> WorkerSettings:

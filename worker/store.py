@@ -158,18 +158,34 @@ class JobStore:
 
     # ------------------------------------------------------------------ submit and read
 
-    def submit(self, spec_json: str, *, name: str | None, algorithm: str, total_env_steps: int,
-               max_attempts: int) -> int:
+    def submit(
+        self, spec_json: str, *, name: str | None, algorithm: str, total_env_steps: int, max_attempts: int
+    ) -> int:
         """Queue a job; returns its id."""
         now = db_now()
         with self._write() as conn:
-            return int(conn.execute(
-                insert(jobs).values(
-                    name=name, algorithm=algorithm, spec=spec_json, status="queued", created_at=now,
-                    updated_at=now, attempt=0, failures=0, max_attempts=max_attempts, cancel_requested=False,
-                    last_seq=0, env_steps=0, total_env_steps=total_env_steps, run_seconds=0.0,
-                ).returning(jobs.c.id)
-            ).scalar_one())
+            return int(
+                conn.execute(
+                    insert(jobs)
+                    .values(
+                        name=name,
+                        algorithm=algorithm,
+                        spec=spec_json,
+                        status="queued",
+                        created_at=now,
+                        updated_at=now,
+                        attempt=0,
+                        failures=0,
+                        max_attempts=max_attempts,
+                        cancel_requested=False,
+                        last_seq=0,
+                        env_steps=0,
+                        total_env_steps=total_env_steps,
+                        run_seconds=0.0,
+                    )
+                    .returning(jobs.c.id)
+                ).scalar_one()
+            )
 
     def get_job(self, job_id: int) -> dict[str, Any] | None:
         if not _valid_id(job_id):
@@ -178,17 +194,20 @@ class JobStore:
             row = conn.execute(select(jobs).where(jobs.c.id == job_id)).mappings().first()
             return dict(row) if row else None
 
-    def list_jobs(self, *, statuses: list[str] | None = None, limit: int = 50, offset: int = 0,
-                  before_id: int | None = None) -> tuple[int, list[dict[str, Any]]]:
+    def list_jobs(
+        self, *, statuses: list[str] | None = None, limit: int = 50, offset: int = 0, before_id: int | None = None
+    ) -> tuple[int, list[dict[str, Any]]]:
         """(total matching, one page newest first). ``before_id``: only jobs with a smaller id
         (a cursor: pages do not shift when jobs arrive meanwhile); ``total`` ignores it."""
         where = jobs.c.status.in_(statuses) if statuses else literal(True)
         page = where if before_id is None else and_(where, jobs.c.id < before_id)
         with self._read() as conn:
             total = conn.execute(select(func.count()).select_from(jobs).where(where)).scalar_one()
-            rows = conn.execute(
-                select(*_LIST_COLUMNS).where(page).order_by(jobs.c.id.desc()).limit(limit).offset(offset)
-            ).mappings().all()
+            rows = (
+                conn.execute(select(*_LIST_COLUMNS).where(page).order_by(jobs.c.id.desc()).limit(limit).offset(offset))
+                .mappings()
+                .all()
+            )
         return int(total), [dict(r) for r in rows]
 
     def status_counts(self) -> dict[str, int]:
@@ -209,26 +228,39 @@ class JobStore:
     def metrics_after(self, job_id: int, after: int = 0, limit: int = 1000) -> list[dict[str, Any]]:
         """Progress rows with ``seq > after``, oldest first."""
         with self._read() as conn:
-            rows = conn.execute(
-                select(metrics.c.seq, metrics.c.attempt, metrics.c.created_at, metrics.c.env_steps, metrics.c.data)
-                .where(metrics.c.job_id == job_id, metrics.c.seq > after)
-                .order_by(metrics.c.seq).limit(limit)
-            ).mappings().all()
+            rows = (
+                conn.execute(
+                    select(metrics.c.seq, metrics.c.attempt, metrics.c.created_at, metrics.c.env_steps, metrics.c.data)
+                    .where(metrics.c.job_id == job_id, metrics.c.seq > after)
+                    .order_by(metrics.c.seq)
+                    .limit(limit)
+                )
+                .mappings()
+                .all()
+            )
         return [dict(r) for r in rows]
 
     def latest_metrics(self, job_id: int) -> dict[str, Any] | None:
         with self._read() as conn:
-            row = conn.execute(
-                select(metrics.c.seq, metrics.c.attempt, metrics.c.created_at, metrics.c.env_steps, metrics.c.data)
-                .where(metrics.c.job_id == job_id).order_by(metrics.c.seq.desc()).limit(1)
-            ).mappings().first()
+            row = (
+                conn.execute(
+                    select(metrics.c.seq, metrics.c.attempt, metrics.c.created_at, metrics.c.env_steps, metrics.c.data)
+                    .where(metrics.c.job_id == job_id)
+                    .order_by(metrics.c.seq.desc())
+                    .limit(1)
+                )
+                .mappings()
+                .first()
+            )
         return dict(row) if row else None
 
     def list_attempts(self, job_id: int) -> list[dict[str, Any]]:
         with self._read() as conn:
-            rows = conn.execute(
-                select(attempts).where(attempts.c.job_id == job_id).order_by(attempts.c.attempt)
-            ).mappings().all()
+            rows = (
+                conn.execute(select(attempts).where(attempts.c.job_id == job_id).order_by(attempts.c.attempt))
+                .mappings()
+                .all()
+            )
         return [dict(r) for r in rows]
 
     def request_cancel(self, job_id: int) -> str | None:
@@ -245,21 +277,30 @@ class JobStore:
                 select(jobs.c.status).where(jobs.c.id == job_id).with_for_update()
             ).scalar_one_or_none()
             if status == "queued":
-                conn.execute(update(jobs).where(jobs.c.id == job_id, jobs.c.status == "queued").values(
-                    status="cancelled", cancel_requested=True, finished_at=now, updated_at=now, phase=None))
+                conn.execute(
+                    update(jobs)
+                    .where(jobs.c.id == job_id, jobs.c.status == "queued")
+                    .values(status="cancelled", cancel_requested=True, finished_at=now, updated_at=now, phase=None)
+                )
                 _drop_checkpoint(conn, job_id)
                 return "stopped"
             if status == "running":
-                conn.execute(update(jobs).where(jobs.c.id == job_id, jobs.c.status == "running")
-                             .values(cancel_requested=True, updated_at=now))
+                conn.execute(
+                    update(jobs)
+                    .where(jobs.c.id == job_id, jobs.c.status == "running")
+                    .values(cancel_requested=True, updated_at=now)
+                )
                 return "requested"
         return status
 
     def active_count(self) -> int:
         """Jobs queued or running (the service's cap on them: ``max_active_jobs``)."""
         with self._read() as conn:
-            return int(conn.execute(select(func.count()).select_from(jobs)
-                                    .where(jobs.c.status.in_(("queued", "running")))).scalar_one())
+            return int(
+                conn.execute(
+                    select(func.count()).select_from(jobs).where(jobs.c.status.in_(("queued", "running")))
+                ).scalar_one()
+            )
 
     def delete_job(self, job_id: int) -> str | None:
         """Delete a job that is not running (ended, or still queued: no worker holds it) with
@@ -284,9 +325,15 @@ class JobStore:
     def list_artifacts(self, job_id: int) -> list[dict[str, Any]]:
         cols = [c for c in artifacts.c if c.name != "data"]
         with self._read() as conn:
-            rows = conn.execute(
-                select(*cols).where(artifacts.c.job_id == job_id).order_by(artifacts.c.kind.desc(), artifacts.c.name)
-            ).mappings().all()
+            rows = (
+                conn.execute(
+                    select(*cols)
+                    .where(artifacts.c.job_id == job_id)
+                    .order_by(artifacts.c.kind.desc(), artifacts.c.name)
+                )
+                .mappings()
+                .all()
+            )
         return [dict(r) for r in rows]
 
     def artifact_info(self, job_id: int, name: str) -> dict[str, Any] | None:
@@ -294,9 +341,11 @@ class JobStore:
             return None
         cols = [c for c in artifacts.c if c.name != "data"]
         with self._read() as conn:
-            row = conn.execute(
-                select(*cols).where(artifacts.c.job_id == job_id, artifacts.c.name == name)
-            ).mappings().first()
+            row = (
+                conn.execute(select(*cols).where(artifacts.c.job_id == job_id, artifacts.c.name == name))
+                .mappings()
+                .first()
+            )
         return dict(row) if row else None
 
     def read_artifact(self, job_id: int, name: str) -> bytes | None:
@@ -305,8 +354,9 @@ class JobStore:
                 select(artifacts.c.data).where(artifacts.c.job_id == job_id, artifacts.c.name == name)
             ).scalar_one_or_none()
 
-    def iter_artifact(self, job_id: int, name: str, size: int, sha256: str, chunk: int = _READ_CHUNK
-                      ) -> Iterator[bytes]:
+    def iter_artifact(
+        self, job_id: int, name: str, size: int, sha256: str, chunk: int = _READ_CHUNK
+    ) -> Iterator[bytes]:
         """The artefact's bytes in chunks, so a large file never sits whole in the server's memory.
 
         If the file is replaced meanwhile (a newer checkpoint), the stream stops short rather
@@ -315,8 +365,9 @@ class JobStore:
             part = func.substr(artifacts.c.data, start + 1, chunk, type_=LargeBinary)
             with self._read() as conn:
                 data = conn.execute(
-                    select(part).where(artifacts.c.job_id == job_id, artifacts.c.name == name,
-                                       artifacts.c.sha256 == sha256)
+                    select(part).where(
+                        artifacts.c.job_id == job_id, artifacts.c.name == name, artifacts.c.sha256 == sha256
+                    )
                 ).scalar_one_or_none()
             if not data:
                 return
@@ -328,40 +379,69 @@ class JobStore:
     @staticmethod
     def _put_artifact(conn: Connection, c: Claim, name: str, data: bytes, kind: str) -> None:
         conn.execute(delete(artifacts).where(artifacts.c.job_id == c.job_id, artifacts.c.name == name))
-        conn.execute(insert(artifacts).values(
-            job_id=c.job_id, name=name, kind=kind, attempt=c.attempt, size=len(data),
-            sha256=hashlib.sha256(data).hexdigest(), content_type=content_type_for(name),
-            created_at=db_now(), data=data,
-        ))
+        conn.execute(
+            insert(artifacts).values(
+                job_id=c.job_id,
+                name=name,
+                kind=kind,
+                attempt=c.attempt,
+                size=len(data),
+                sha256=hashlib.sha256(data).hexdigest(),
+                content_type=content_type_for(name),
+                created_at=db_now(),
+                data=data,
+            )
+        )
 
     # ------------------------------------------------------------------ workers
 
     def register_worker(self, worker_id: str, *, hostname: str, pid: int, runner: str, ttl_s: float) -> None:
         now = db_now()
         with self._write() as conn:
-            conn.execute(insert(workers).values(
-                id=worker_id, hostname=hostname, pid=pid, runner=runner, started_at=now, last_seen=now,
-                expires_at=now + ttl_s,
-            ))
+            conn.execute(
+                insert(workers).values(
+                    id=worker_id,
+                    hostname=hostname,
+                    pid=pid,
+                    runner=runner,
+                    started_at=now,
+                    last_seen=now,
+                    expires_at=now + ttl_s,
+                )
+            )
 
     def touch_worker(self, worker_id: str, *, job_id: int | None, ttl_s: float) -> None:
         now = db_now()
         with self._write() as conn:
-            conn.execute(update(workers).where(workers.c.id == worker_id)
-                         .values(last_seen=now, expires_at=now + ttl_s, job_id=job_id))
+            conn.execute(
+                update(workers)
+                .where(workers.c.id == worker_id)
+                .values(last_seen=now, expires_at=now + ttl_s, job_id=job_id)
+            )
 
     def worker_stopped(self, worker_id: str) -> None:
         with self._write() as conn:
-            conn.execute(update(workers).where(workers.c.id == worker_id)
-                         .values(stopped_at=db_now(), job_id=None))
+            conn.execute(update(workers).where(workers.c.id == worker_id).values(stopped_at=db_now(), job_id=None))
 
     def live_workers(self) -> list[dict[str, Any]]:
         with self._read() as conn:
-            rows = conn.execute(
-                select(workers.c.id, workers.c.hostname, workers.c.pid, workers.c.runner, workers.c.started_at,
-                       workers.c.last_seen, workers.c.job_id)
-                .where(workers.c.stopped_at.is_(None), workers.c.expires_at > db_now()).order_by(workers.c.started_at)
-            ).mappings().all()
+            rows = (
+                conn.execute(
+                    select(
+                        workers.c.id,
+                        workers.c.hostname,
+                        workers.c.pid,
+                        workers.c.runner,
+                        workers.c.started_at,
+                        workers.c.last_seen,
+                        workers.c.job_id,
+                    )
+                    .where(workers.c.stopped_at.is_(None), workers.c.expires_at > db_now())
+                    .order_by(workers.c.started_at)
+                )
+                .mappings()
+                .all()
+            )
         return [dict(r) for r in rows]
 
     # ------------------------------------------------------------------ the queue protocol
@@ -372,30 +452,59 @@ class JobStore:
         pick = (
             select(jobs.c.id)
             .where(jobs.c.status == "queued", or_(jobs.c.run_after.is_(None), jobs.c.run_after <= now))
-            .order_by(jobs.c.id).limit(1)
+            .order_by(jobs.c.id)
+            .limit(1)
             .with_for_update(skip_locked=True)  # rendered on PostgreSQL, omitted on SQLite
             .scalar_subquery()
         )
         stmt = (
-            update(jobs).where(jobs.c.id == pick, jobs.c.status == "queued")
-            .values(status="running", attempt=jobs.c.attempt + 1, worker_id=worker_id, heartbeat_at=now,
-                    lease_expires_at=now + lease_s, started_at=func.coalesce(jobs.c.started_at, now),
-                    updated_at=now, run_after=None, phase="starting",
-                    env_steps=func.coalesce(jobs.c.checkpoint_env_steps, 0))
-            .returning(jobs.c.id, jobs.c.attempt, jobs.c.spec, jobs.c.checkpoint_env_steps, jobs.c.run_seconds,
-                       jobs.c.failures, jobs.c.max_attempts)
+            update(jobs)
+            .where(jobs.c.id == pick, jobs.c.status == "queued")
+            .values(
+                status="running",
+                attempt=jobs.c.attempt + 1,
+                worker_id=worker_id,
+                heartbeat_at=now,
+                lease_expires_at=now + lease_s,
+                started_at=func.coalesce(jobs.c.started_at, now),
+                updated_at=now,
+                run_after=None,
+                phase="starting",
+                env_steps=func.coalesce(jobs.c.checkpoint_env_steps, 0),
+            )
+            .returning(
+                jobs.c.id,
+                jobs.c.attempt,
+                jobs.c.spec,
+                jobs.c.checkpoint_env_steps,
+                jobs.c.run_seconds,
+                jobs.c.failures,
+                jobs.c.max_attempts,
+            )
         )
         with self._write() as conn:
             row = conn.execute(stmt).first()
             if row is None:
                 return None
-            claim = Claim(job_id=int(row.id), attempt=int(row.attempt), spec_json=row.spec,
-                          checkpoint_env_steps=row.checkpoint_env_steps, run_seconds=float(row.run_seconds),
-                          failures=int(row.failures), max_attempts=int(row.max_attempts))
-            conn.execute(insert(attempts).values(
-                job_id=claim.job_id, attempt=claim.attempt, worker_id=worker_id, started_at=now,
-                outcome="running", resumed_from_env_steps=claim.checkpoint_env_steps,
-            ))
+            claim = Claim(
+                job_id=int(row.id),
+                attempt=int(row.attempt),
+                spec_json=row.spec,
+                checkpoint_env_steps=row.checkpoint_env_steps,
+                run_seconds=float(row.run_seconds),
+                failures=int(row.failures),
+                max_attempts=int(row.max_attempts),
+            )
+            conn.execute(
+                insert(attempts).values(
+                    job_id=claim.job_id,
+                    attempt=claim.attempt,
+                    worker_id=worker_id,
+                    started_at=now,
+                    outcome="running",
+                    resumed_from_env_steps=claim.checkpoint_env_steps,
+                )
+            )
         return claim
 
     def heartbeat(self, c: Claim, *, lease_s: float) -> Beat:
@@ -403,7 +512,9 @@ class JobStore:
         now = db_now()
         with self._write() as conn:
             row = conn.execute(
-                update(jobs).where(_fence(c)).values(lease_expires_at=now + lease_s, heartbeat_at=now)
+                update(jobs)
+                .where(_fence(c))
+                .values(lease_expires_at=now + lease_s, heartbeat_at=now)
                 .returning(jobs.c.cancel_requested)
             ).first()
         return Beat(alive=False) if row is None else Beat(alive=True, cancel_requested=bool(row[0]))
@@ -426,18 +537,25 @@ class JobStore:
             seq = conn.execute(update(jobs).where(_fence(c)).values(**values).returning(jobs.c.last_seq)).scalar()
             if seq is None:
                 return None
-            conn.execute(insert(metrics).values(
-                job_id=c.job_id, seq=seq, attempt=c.attempt, created_at=db_now(), env_steps=env_steps,
-                data=to_json(rec.to_dict()),
-            ))
+            conn.execute(
+                insert(metrics).values(
+                    job_id=c.job_id,
+                    seq=seq,
+                    attempt=c.attempt,
+                    created_at=db_now(),
+                    env_steps=env_steps,
+                    data=to_json(rec.to_dict()),
+                )
+            )
         return int(seq)
 
     def save_checkpoint(self, c: Claim, env_steps: int, data: bytes) -> bool:
         """Replace the job's checkpoint (fenced). A resumed attempt starts from it."""
         try:
             with self._write() as conn:
-                r = conn.execute(update(jobs).where(_fence(c)).values(
-                    checkpoint_env_steps=env_steps, updated_at=db_now()))
+                r = conn.execute(
+                    update(jobs).where(_fence(c)).values(checkpoint_env_steps=env_steps, updated_at=db_now())
+                )
                 if r.rowcount != 1:
                     raise _Fenced
                 self._put_artifact(conn, c, CHECKPOINT_NAME, data, "checkpoint")
@@ -445,24 +563,45 @@ class JobStore:
             return False
         return True
 
-    def complete(self, c: Claim, *, files: Mapping[str, bytes], summary: Any, env_steps: int,
-                 attempt_seconds: float, keep_checkpoint: bool = False) -> bool:
+    def complete(
+        self,
+        c: Claim,
+        *,
+        files: Mapping[str, bytes],
+        summary: Any,
+        env_steps: int,
+        attempt_seconds: float,
+        keep_checkpoint: bool = False,
+    ) -> bool:
         """Store the outputs and mark the job succeeded, all in one fenced transaction."""
         now = db_now()
         try:
             with self._write() as conn:
-                r = conn.execute(update(jobs).where(_fence(c)).values(
-                    status="succeeded", finished_at=now, updated_at=now, worker_id=None, lease_expires_at=None,
-                    phase="done", env_steps=env_steps, summary=None if summary is None else to_json(summary),
-                    error=None, error_detail=None, run_seconds=jobs.c.run_seconds + attempt_seconds,
-                ))
+                r = conn.execute(
+                    update(jobs)
+                    .where(_fence(c))
+                    .values(
+                        status="succeeded",
+                        finished_at=now,
+                        updated_at=now,
+                        worker_id=None,
+                        lease_expires_at=None,
+                        phase="done",
+                        env_steps=env_steps,
+                        summary=None if summary is None else to_json(summary),
+                        error=None,
+                        error_detail=None,
+                        run_seconds=jobs.c.run_seconds + attempt_seconds,
+                    )
+                )
                 if r.rowcount != 1:
                     raise _Fenced
                 for name, data in files.items():
                     self._put_artifact(conn, c, name, data, "output")
                 if not keep_checkpoint:
-                    conn.execute(delete(artifacts).where(artifacts.c.job_id == c.job_id,
-                                                         artifacts.c.kind == "checkpoint"))
+                    conn.execute(
+                        delete(artifacts).where(artifacts.c.job_id == c.job_id, artifacts.c.kind == "checkpoint")
+                    )
                 self._end_attempt(conn, c, "succeeded", now)
         except _Fenced:
             return False
@@ -471,10 +610,19 @@ class JobStore:
     def finish_cancelled(self, c: Claim, *, attempt_seconds: float) -> bool:
         now = db_now()
         with self._write() as conn:
-            r = conn.execute(update(jobs).where(_fence(c)).values(
-                status="cancelled", finished_at=now, updated_at=now, worker_id=None, lease_expires_at=None,
-                phase=None, run_seconds=jobs.c.run_seconds + attempt_seconds,
-            ))
+            r = conn.execute(
+                update(jobs)
+                .where(_fence(c))
+                .values(
+                    status="cancelled",
+                    finished_at=now,
+                    updated_at=now,
+                    worker_id=None,
+                    lease_expires_at=None,
+                    phase=None,
+                    run_seconds=jobs.c.run_seconds + attempt_seconds,
+                )
+            )
             if r.rowcount != 1:
                 return False
             _drop_checkpoint(conn, c.job_id)
@@ -493,47 +641,84 @@ class JobStore:
             if row is None:
                 return False
             cancelled = bool(row[0])
-            conn.execute(update(jobs).where(_fence(c)).values(
-                status="cancelled" if cancelled else "queued", finished_at=now if cancelled else None,
-                updated_at=now, worker_id=None, lease_expires_at=None, phase=None,
-                run_seconds=jobs.c.run_seconds + attempt_seconds,
-            ))
+            conn.execute(
+                update(jobs)
+                .where(_fence(c))
+                .values(
+                    status="cancelled" if cancelled else "queued",
+                    finished_at=now if cancelled else None,
+                    updated_at=now,
+                    worker_id=None,
+                    lease_expires_at=None,
+                    phase=None,
+                    run_seconds=jobs.c.run_seconds + attempt_seconds,
+                )
+            )
             if cancelled:
                 _drop_checkpoint(conn, c.job_id)
             self._end_attempt(conn, c, "cancelled" if cancelled else "released", now)
         return True
 
-    def fail_attempt(self, c: Claim, *, error: str, detail: str | None, outcome: str, retry_delay_s: float,
-                     attempt_seconds: float) -> str | None:
+    def fail_attempt(
+        self, c: Claim, *, error: str, detail: str | None, outcome: str, retry_delay_s: float, attempt_seconds: float
+    ) -> str | None:
         """Record a failed attempt: requeue (after a back-off) or, at the retry limit, ``failed``.
 
         Returns the job's new status, or None if fenced off."""
-        return self._fail(c, error=error, detail=detail, outcome=outcome, retry_delay_s=retry_delay_s,
-                          attempt_seconds=attempt_seconds, retry=True)
+        return self._fail(
+            c,
+            error=error,
+            detail=detail,
+            outcome=outcome,
+            retry_delay_s=retry_delay_s,
+            attempt_seconds=attempt_seconds,
+            retry=True,
+        )
 
-    def fail_permanently(self, c: Claim, *, error: str, detail: str | None = None,
-                         attempt_seconds: float = 0.0) -> str | None:
+    def fail_permanently(
+        self, c: Claim, *, error: str, detail: str | None = None, attempt_seconds: float = 0.0
+    ) -> str | None:
         """Fail the job at once, no retry (e.g. a stored spec this worker cannot read or run)."""
-        return self._fail(c, error=error, detail=detail, outcome="failed", retry_delay_s=0.0,
-                          attempt_seconds=attempt_seconds, retry=False)
+        return self._fail(
+            c,
+            error=error,
+            detail=detail,
+            outcome="failed",
+            retry_delay_s=0.0,
+            attempt_seconds=attempt_seconds,
+            retry=False,
+        )
 
-    def _fail(self, c: Claim, *, error: str, detail: str | None, outcome: str, retry_delay_s: float,
-              attempt_seconds: float, retry: bool) -> str | None:
+    def _fail(
+        self,
+        c: Claim,
+        *,
+        error: str,
+        detail: str | None,
+        outcome: str,
+        retry_delay_s: float,
+        attempt_seconds: float,
+        retry: bool,
+    ) -> str | None:
         now = db_now()
         error, detail = _no_nul(error), _no_nul(detail)
         with self._write() as conn:
             row = conn.execute(  # locked, as in release()
-                select(jobs.c.failures, jobs.c.max_attempts, jobs.c.cancel_requested).where(_fence(c))
-                .with_for_update()
+                select(jobs.c.failures, jobs.c.max_attempts, jobs.c.cancel_requested).where(_fence(c)).with_for_update()
             ).first()
             if row is None:
                 return None
             failures = int(row.failures) + 1
             status = _after_failure(failures, int(row.max_attempts), bool(row.cancel_requested), retry)
-            conn.execute(update(jobs).where(_fence(c)).values(
-                **_failure_values(status, failures, int(row.max_attempts), error, retry_delay_s, now),
-                error_detail=detail, run_seconds=jobs.c.run_seconds + attempt_seconds,
-            ))
+            conn.execute(
+                update(jobs)
+                .where(_fence(c))
+                .values(
+                    **_failure_values(status, failures, int(row.max_attempts), error, retry_delay_s, now),
+                    error_detail=detail,
+                    run_seconds=jobs.c.run_seconds + attempt_seconds,
+                )
+            )
             if status in TERMINAL_STATUSES:
                 _drop_checkpoint(conn, c.job_id)
             self._end_attempt(conn, c, outcome, now, error)
@@ -545,22 +730,39 @@ class JobStore:
         out = []
         with self._write() as conn:
             rows = conn.execute(
-                select(jobs.c.id, jobs.c.attempt, jobs.c.worker_id, jobs.c.failures, jobs.c.max_attempts,
-                       jobs.c.cancel_requested)
+                select(
+                    jobs.c.id,
+                    jobs.c.attempt,
+                    jobs.c.worker_id,
+                    jobs.c.failures,
+                    jobs.c.max_attempts,
+                    jobs.c.cancel_requested,
+                )
                 .where(jobs.c.status == "running", jobs.c.lease_expires_at < now)
-                .order_by(jobs.c.id).with_for_update(skip_locked=True)
+                .order_by(jobs.c.id)
+                .with_for_update(skip_locked=True)
             ).all()
             for r in rows:
-                c = Claim(job_id=int(r.id), attempt=int(r.attempt), spec_json="", checkpoint_env_steps=None,
-                          run_seconds=0.0, failures=int(r.failures), max_attempts=int(r.max_attempts))
+                c = Claim(
+                    job_id=int(r.id),
+                    attempt=int(r.attempt),
+                    spec_json="",
+                    checkpoint_env_steps=None,
+                    run_seconds=0.0,
+                    failures=int(r.failures),
+                    max_attempts=int(r.max_attempts),
+                )
                 failures = c.failures + 1
                 status = _after_failure(failures, c.max_attempts, bool(r.cancel_requested), True)
-                error = (f"lease expired: worker {r.worker_id} stopped sending heartbeats "
-                         f"(attempt {c.attempt})")
-                conn.execute(update(jobs).where(_fence(c)).values(
-                    **_failure_values(status, failures, c.max_attempts, error, retry_delay_s, now),
-                    error_detail=None,
-                ))
+                error = f"lease expired: worker {r.worker_id} stopped sending heartbeats (attempt {c.attempt})"
+                conn.execute(
+                    update(jobs)
+                    .where(_fence(c))
+                    .values(
+                        **_failure_values(status, failures, c.max_attempts, error, retry_delay_s, now),
+                        error_detail=None,
+                    )
+                )
                 if status in TERMINAL_STATUSES:
                     _drop_checkpoint(conn, c.job_id)
                 self._end_attempt(conn, c, "lease-expired", now, error)
@@ -569,8 +771,11 @@ class JobStore:
 
     @staticmethod
     def _end_attempt(conn: Connection, c: Claim, outcome: str, now: Any, error: str | None = None) -> None:
-        conn.execute(update(attempts).where(attempts.c.job_id == c.job_id, attempts.c.attempt == c.attempt)
-                     .values(ended_at=now, outcome=outcome, error=error))
+        conn.execute(
+            update(attempts)
+            .where(attempts.c.job_id == c.job_id, attempts.c.attempt == c.attempt)
+            .values(ended_at=now, outcome=outcome, error=error)
+        )
 
 
 def _drop_checkpoint(conn: Connection, job_id: int) -> None:
@@ -597,8 +802,9 @@ def _after_failure(failures: int, max_attempts: int, cancel_requested: bool, ret
     return "queued"
 
 
-def _failure_values(status: str, failures: int, max_attempts: int, error: str, retry_delay_s: float,
-                    now: Any) -> dict[str, Any]:
+def _failure_values(
+    status: str, failures: int, max_attempts: int, error: str, retry_delay_s: float, now: Any
+) -> dict[str, Any]:
     if status == "failed":
         shown = f"{error} (failed attempt {failures} of {max_attempts}; no retries left)"
     elif status == "queued":
@@ -607,8 +813,13 @@ def _failure_values(status: str, failures: int, max_attempts: int, error: str, r
         shown = error
     delay = min(retry_delay_s * 2 ** (failures - 1), 3600.0) if retry_delay_s > 0 else 0.0
     return {
-        "status": status, "failures": failures, "error": shown, "updated_at": now, "worker_id": None,
-        "lease_expires_at": None, "phase": None,
+        "status": status,
+        "failures": failures,
+        "error": shown,
+        "updated_at": now,
+        "worker_id": None,
+        "lease_expires_at": None,
+        "phase": None,
         "finished_at": now if status in TERMINAL_STATUSES else None,
         "run_after": now + delay if status == "queued" and delay > 0 else None,
     }

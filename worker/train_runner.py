@@ -16,8 +16,9 @@ from web.recording import add_recording
 def train(spec, *, on_progress=None, on_checkpoint=None, should_stop=None, checkpoint=None) -> RunResult:
     """``modsat_core.train.train``, plus ``evaluation.viser`` (and ``verification.json``) among
     the files of a finished run."""
-    result = _train(spec, on_progress=on_progress, on_checkpoint=on_checkpoint, should_stop=should_stop,
-                    checkpoint=checkpoint)
+    result = _train(
+        spec, on_progress=on_progress, on_checkpoint=on_checkpoint, should_stop=should_stop, checkpoint=checkpoint
+    )
     if not result.stopped:
         add_recording(result.files)
         add_verification(result.files)

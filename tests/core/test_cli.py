@@ -8,8 +8,9 @@ import pytest
 
 
 def modsat(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "server.cli", *args], capture_output=True, text=True,
-                          timeout=120, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "server.cli", *args], capture_output=True, text=True, timeout=120, cwd=cwd
+    )
 
 
 def test_bench_sim_json_reports_rates_and_ratios():
@@ -22,7 +23,8 @@ def test_bench_sim_json_reports_rates_and_ratios():
     for v in res.values():
         assert v["control_steps_per_s"] > 0
     assert res["torch_8"]["ratio_to_numpy"] == pytest.approx(
-        res["torch_8"]["control_steps_per_s"] / res["numpy_1"]["control_steps_per_s"])
+        res["torch_8"]["control_steps_per_s"] / res["numpy_1"]["control_steps_per_s"]
+    )
 
 
 def test_presets_and_schema():
@@ -54,7 +56,6 @@ def test_bad_flags_get_a_message_not_a_traceback():
     assert r.returncode == 2 and "--seconds" in r.stderr and "Traceback" not in r.stderr
 
 
-
 def test_train_and_eval_commands(tmp_path):
     from ..learning.conftest import tiny_spec
 
@@ -65,8 +66,15 @@ def test_train_and_eval_commands(tmp_path):
     assert r.returncode == 0, r.stderr
     assert ("policy" in r.stdout and "PD baseline" in r.stdout) or "valid=False" in r.stdout
     names = {p.name for p in out.iterdir()}
-    assert {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.json", "trajectories.json",
-            "policy.pt"} <= names
+    assert {
+        "spec.json",
+        "curve.json",
+        "curve.png",
+        "design.json",
+        "evaluation.json",
+        "trajectories.json",
+        "policy.pt",
+    } <= names
     assert "checkpoint.pt" not in names  # removed once the run finished
     assert json.loads((out / "spec.json").read_text())["training"]["total_env_steps"] == 160
     r = modsat("eval", str(out), "--episodes", "2", "--json")
@@ -91,8 +99,10 @@ def test_train_and_eval_reject_bad_input(tmp_path):
 def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     a_file = tmp_path / "file"
     a_file.write_text("")
-    for args in (["train", "--preset", "quick", "--out", str(a_file)],
-                 ["bench", "learn", "--preset", "quick", "--out", str(a_file / "sub")]):
+    for args in (
+        ["train", "--preset", "quick", "--out", str(a_file)],
+        ["bench", "learn", "--preset", "quick", "--out", str(a_file / "sub")],
+    ):
         r = modsat(*args)
         assert r.returncode == 2 and str(a_file) in r.stderr and "Traceback" not in r.stderr
     r = modsat("bench", "rl-vs-ga", "--preset", "quick", "--seeds", "0", "-4")
@@ -111,11 +121,18 @@ def test_sigterm_stops_train_at_a_checkpoint_that_resumes(tmp_path):
     from ..learning.conftest import tiny_spec
 
     spec_file = tmp_path / "spec.json"
-    spec_file.write_text(tiny_spec(training__total_env_steps=200_000, training__checkpoint_every_steps=160,
-                                   training__eval_every_steps=100_000).model_dump_json())
+    spec_file.write_text(
+        tiny_spec(
+            training__total_env_steps=200_000, training__checkpoint_every_steps=160, training__eval_every_steps=100_000
+        ).model_dump_json()
+    )
     out = tmp_path / "run"
-    p = subprocess.Popen([sys.executable, "-m", "server.cli", "train", str(spec_file), "--out", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "server.cli", "train", str(spec_file), "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 120
     while not (out / "checkpoint.pt").exists() and time.monotonic() < deadline and p.poll() is None:
         time.sleep(0.2)
@@ -127,8 +144,7 @@ def test_sigterm_stops_train_at_a_checkpoint_that_resumes(tmp_path):
 
 def test_a_closed_pipe_is_silent():
     """`modsat schema | head -c 10`: the reader has left; no 'Broken pipe' message, no traceback."""
-    p = subprocess.Popen([sys.executable, "-m", "server.cli", "schema"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE)
+    p = subprocess.Popen([sys.executable, "-m", "server.cli", "schema"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     p.stdout.close()  # before the 23 kB of schema are written
     err = p.stderr.read().decode()
     assert p.wait(60) == 141, err  # as a shell reports a command ended by SIGPIPE
@@ -145,7 +161,13 @@ def test_progress_eta_follows_the_recent_rate():
     bar.time = lambda: clock[0]
     for t, steps in ((0, 0), (100, 100_000), (200, 200_000), (300, 201_000)):  # the machine got 100x slower
         clock[0] = float(t)
-        bar({"env_steps": steps, "total_env_steps": 300_000, "phase": "training", "eval": {"mean_return": 1.0,
-                                                                                          "success_rate": 0.0}})
+        bar(
+            {
+                "env_steps": steps,
+                "total_env_steps": 300_000,
+                "phase": "training",
+                "eval": {"mean_return": 1.0, "success_rate": 0.0},
+            }
+        )
     line = bar.stream.getvalue().splitlines()[-1]
     assert "10 steps/s" in line and "eta 9,900 s" in line, line

@@ -134,10 +134,12 @@ def test_gravity_gradient_matches_formula_for_elongated_body():
     # Radial direction = N x at t=0, phase 0. Rotate the rod by theta about N z (in the orbit
     # plane): classic result |tau| = 3/2 n^2 (I_t - I_a) sin(2 theta), about the orbit normal.
     for theta in (0.0, 0.3, math.pi / 4, 1.2):
-        q = quat.from_axis_angle(torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64),
-                                 torch.tensor([theta], dtype=torch.float64))
-        tau = dyn.gravity_gradient_B(q, torch.tensor(I).unsqueeze(0), torch.zeros(1, dtype=torch.float64), n,
-                                     torch.zeros(1, dtype=torch.float64))[0]
+        q = quat.from_axis_angle(
+            torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64), torch.tensor([theta], dtype=torch.float64)
+        )
+        tau = dyn.gravity_gradient_B(
+            q, torch.tensor(I).unsqueeze(0), torch.zeros(1, dtype=torch.float64), n, torch.zeros(1, dtype=torch.float64)
+        )[0]
         expected = 1.5 * n**2 * (I_t - I_a) * math.sin(2 * theta)
         assert tau[2].item() == pytest.approx(-expected, abs=1e-18)  # restoring: pulls the rod to radial
         assert abs(tau[0].item()) < 1e-20 and abs(tau[1].item()) < 1e-20
@@ -145,8 +147,13 @@ def test_gravity_gradient_matches_formula_for_elongated_body():
     rng = np.random.default_rng(2)
     q = quat.normalize(torch.tensor(rng.normal(size=(1, 4))))
     t, phase = 1234.5, 0.7
-    tau = dyn.gravity_gradient_B(q, torch.tensor(I).unsqueeze(0), torch.tensor([t], dtype=torch.float64), n,
-                                 torch.tensor([phase], dtype=torch.float64))[0]
+    tau = dyn.gravity_gradient_B(
+        q,
+        torch.tensor(I).unsqueeze(0),
+        torch.tensor([t], dtype=torch.float64),
+        n,
+        torch.tensor([phase], dtype=torch.float64),
+    )[0]
     u = n * t + phase
     r_B = NumpySatellite.dcm(q[0].numpy()).T @ np.array([math.cos(u), math.sin(u), 0.0])
     np.testing.assert_allclose(tau.numpy(), 3 * n**2 * np.cross(r_B, I @ r_B), rtol=1e-12, atol=1e-22)

@@ -91,8 +91,9 @@ def test_settled_bonus_is_paid_only_below_the_rate_tolerance():
     assert r == pytest.approx(1.0 - 1.0 + 9.0)  # at rest on target: settled
     env.reset(seed=0, options={"q_TN": [1.0, 0, 0, 0], "omega_B": [0.02, 0.0, 0.0]})
     _, r, *_, info = env.step(np.zeros((1, 3), dtype=np.float32))
-    assert info["error_deg"] < 1.0 and r == pytest.approx(np.exp(-np.radians(info["error_deg"]) / (0.28 * np.pi)) - 1.0,
-                                                          rel=1e-4)
+    assert info["error_deg"] < 1.0 and r == pytest.approx(
+        np.exp(-np.radians(info["error_deg"]) / (0.28 * np.pi)) - 1.0, rel=1e-4
+    )
 
 
 def test_hold_reward_without_in_cone_progress_penalty_and_with_settle_bonus():

@@ -78,7 +78,7 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
             # a package's __init__ is imported by its own modules' imports; a module
             # importing its package's __init__ is not a cycle by itself
             if state.get(d) == "open":
-                found.append([*stack[stack.index(d):], d])
+                found.append([*stack[stack.index(d) :], d])
             elif d not in state:
                 visit(d)
         stack.pop()

@@ -32,8 +32,10 @@ def test_constants_agree_with_the_code():
 
 
 def test_validating_limits_imports_no_torch():
-    code = ("import sys; from modsat_core import limits; from modsat_core.presets import get_preset; "
-            "limits.check(get_preset('paper-5x5x5'), limits.Limits()); print('torch' in sys.modules)")
+    code = (
+        "import sys; from modsat_core import limits; from modsat_core.presets import get_preset; "
+        "limits.check(get_preset('paper-5x5x5'), limits.Limits()); print('torch' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
 
@@ -47,7 +49,7 @@ def test_replay_estimate_is_the_issue_figure():
     big = _spec(design={"grid_size": 10}, training={"buffer_size": 500_000, "total_env_steps": 1_000_000})
     est = limits.estimate(big)
     assert est.replay_bytes / 2**30 == pytest.approx(9.36, abs=0.01)  # "9.4 GiB" in the issue
-    (loc, msg), = limits.check(big, limits.Limits())
+    ((loc, msg),) = limits.check(big, limits.Limits())
     assert loc == ("training", "buffer_size") and "9.4 GiB" in msg
     assert limits.check(big, limits.Limits(max_memory_bytes=None)) == []
 

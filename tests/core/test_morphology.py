@@ -42,11 +42,13 @@ def test_l_shape_products_of_inertia_match_hand_calculation():
     # Centre of mass at (a/3, a/3, 0); module offsets (-1,-1), (2,-1), (-1,2) in units of a/3.
     # sum x y = a^2/9 (1 - 2 - 2) = -a^2/3, so I_xy = -sum m x y = +a^2/3.
     a2 = A * A
-    expected = np.array([
-        [3 * a2 / 6 + 2 * a2 / 3, a2 / 3, 0.0],
-        [a2 / 3, 3 * a2 / 6 + 2 * a2 / 3, 0.0],
-        [0.0, 0.0, 3 * a2 / 6 + 4 * a2 / 3],
-    ])
+    expected = np.array(
+        [
+            [3 * a2 / 6 + 2 * a2 / 3, a2 / 3, 0.0],
+            [a2 / 3, 3 * a2 / 6 + 2 * a2 / 3, 0.0],
+            [0.0, 0.0, 3 * a2 / 6 + 4 * a2 / 3],
+        ]
+    )
     np.testing.assert_allclose(mp.com_grid_m, [A / 3, A / 3, 0.0], rtol=1e-12)
     np.testing.assert_allclose(mp.inertia_B_kgm2, expected, rtol=1e-12, atol=1e-18)
     assert abs(mp.inertia_B_kgm2[0, 1]) > 1e-3  # products of inertia are really there
@@ -61,10 +63,10 @@ def paper_appendix_a(grid, m=M, size=A, swapped=False):
     x, y, z = p_bt.T
     own = m * (size**2 + size**2) / 12
     if swapped:  # eq. (iii) as printed
-        return np.array([np.sum(own + m * (x**2 + z**2)), np.sum(own + m * (y**2 + z**2)),
-                         np.sum(own + m * (x**2 + y**2))])
-    return np.array([np.sum(own + m * (y**2 + z**2)), np.sum(own + m * (x**2 + z**2)),
-                     np.sum(own + m * (x**2 + y**2))])
+        return np.array(
+            [np.sum(own + m * (x**2 + z**2)), np.sum(own + m * (y**2 + z**2)), np.sum(own + m * (x**2 + y**2))]
+        )
+    return np.array([np.sum(own + m * (y**2 + z**2)), np.sum(own + m * (x**2 + z**2)), np.sum(own + m * (x**2 + y**2))])
 
 
 def symmetric_designs(rng, n, count):
@@ -107,8 +109,9 @@ def test_diagonal_equals_eq_ii_for_any_design():
     for _ in range(20):
         g = rng.integers(0, 3, size=(4, 4, 4))
         if (g > 0).any():
-            np.testing.assert_allclose(np.diag(mass_properties(g, M, A).inertia_B_kgm2), paper_appendix_a(g),
-                                       rtol=1e-12)
+            np.testing.assert_allclose(
+                np.diag(mass_properties(g, M, A).inertia_B_kgm2), paper_appendix_a(g), rtol=1e-12
+            )
 
 
 def test_validity_rules():

@@ -15,9 +15,11 @@ def test_pd_flies_100_slews_within_quarter_degree_without_safety_violation():
     assert design.n_actuators == 1
     res = monte_carlo(design, PDController, spec.mission, spec.modules, episodes=100, seed=2024)
     s = res.summary()
-    print(f"\nPD on the full 3x3x3 with centre actuator: success {s['success_rate']:.2%}, "
-          f"median slew time / eigenaxis bound {s['median_slew_time_ratio']:.3f}, "
-          f"median settling {s['median_settling_time_s']:.2f} s, peak rate {s['max_peak_rate_rad_s']:.3f} rad/s")
+    print(
+        f"\nPD on the full 3x3x3 with centre actuator: success {s['success_rate']:.2%}, "
+        f"median slew time / eigenaxis bound {s['median_slew_time_ratio']:.3f}, "
+        f"median settling {s['median_settling_time_s']:.2f} s, peak rate {s['max_peak_rate_rad_s']:.3f} rad/s"
+    )
     assert s["success_rate"] >= 0.99
     assert s["safety_violations"] == 0
     assert all(e["final_error_deg"] <= 0.25 for e in res.episodes if e["success"])

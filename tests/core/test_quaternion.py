@@ -29,8 +29,12 @@ def test_rotate_matches_matrix_and_product():
 def test_axis_angle_and_error_angle():
     axis = torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64)
     q = quat.from_axis_angle(axis, torch.tensor([math.pi / 2], dtype=torch.float64))
-    torch.testing.assert_close(quat.rotate(q, torch.tensor([[1.0, 0, 0]], dtype=torch.float64)),
-                               torch.tensor([[0.0, 1.0, 0.0]], dtype=torch.float64), atol=1e-15, rtol=0)
+    torch.testing.assert_close(
+        quat.rotate(q, torch.tensor([[1.0, 0, 0]], dtype=torch.float64)),
+        torch.tensor([[0.0, 1.0, 0.0]], dtype=torch.float64),
+        atol=1e-15,
+        rtol=0,
+    )
     for ang in (0.0, 1e-9, 0.3, math.pi - 1e-9, math.pi):
         q = quat.from_axis_angle(axis, torch.tensor([ang], dtype=torch.float64))
         assert abs(quat.error_angle(q).item() - ang) < 1e-12
@@ -39,9 +43,14 @@ def test_axis_angle_and_error_angle():
 
 def _cross_matrix(v):
     z = torch.zeros_like(v[:, 0])
-    return torch.stack((torch.stack((z, -v[:, 2], v[:, 1]), -1),
-                        torch.stack((v[:, 2], z, -v[:, 0]), -1),
-                        torch.stack((-v[:, 1], v[:, 0], z), -1)), -2)
+    return torch.stack(
+        (
+            torch.stack((z, -v[:, 2], v[:, 1]), -1),
+            torch.stack((v[:, 2], z, -v[:, 0]), -1),
+            torch.stack((-v[:, 1], v[:, 0], z), -1),
+        ),
+        -2,
+    )
 
 
 def test_kinematics_are_paper_eq_2_and_eq_3_with_its_sign_corrected():

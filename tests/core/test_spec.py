@@ -87,11 +87,25 @@ def test_presets_are_valid_specs_with_paper_numbers():
     assert p3.modules.torque_scale_Nm == 0.8 and p5.modules.torque_scale_Nm == 1.5
     assert p5.design.grid_size == 5
     t = p3.training
-    assert (t.actor_lr, t.critic_lr, t.batch_size, t.buffer_size, t.gamma, t.tau, t.exploration_noise,
-            t.train_frequency, t.hidden_sizes) == (3e-4, 3e-3, 512, 500_000, 0.99, 0.005, 0.2, 2, [400, 300])
+    assert (
+        t.actor_lr,
+        t.critic_lr,
+        t.batch_size,
+        t.buffer_size,
+        t.gamma,
+        t.tau,
+        t.exploration_noise,
+        t.train_frequency,
+        t.hidden_sizes,
+    ) == (3e-4, 3e-3, 512, 500_000, 0.99, 0.005, 0.2, 2, [400, 300])
     m = p3.mission
     assert (m.physics_dt_s, m.frame_skip, m.episode_steps, m.slew_min_deg, m.slew_max_deg) == (
-        1 / 240, 20, 500, 30.0, 150.0)
+        1 / 240,
+        20,
+        500,
+        30.0,
+        150.0,
+    )
     assert get_preset("ga-5x5x5").algorithm == "ga"
     with pytest.raises(KeyError, match="known:"):
         get_preset("nope")

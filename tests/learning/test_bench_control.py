@@ -20,24 +20,44 @@ def test_flat_state_is_what_an_actuator_cell_sees(tiny):
     spec = tiny()
     grid = reference_design(2)
     sim = SlewSim.from_designs([Design.from_grid(grid, spec.modules)] * 3, spec.mission, spec.modules)
-    sim.reset([0, 1, 2], [draw_episode(np.random.default_rng(i), spec.mission, {"omega_B": [0.1, -0.2, 0.05]})
-                          for i in range(3)])
+    sim.reset(
+        [0, 1, 2],
+        [draw_episode(np.random.default_rng(i), spec.mission, {"omega_B": [0.1, -0.2, 0.05]}) for i in range(3)],
+    )
     sim.state.h_B[:] = torch.tensor([0.01, -0.02, 0.03])
     cell = int(np.flatnonzero(grid.reshape(-1) == 2)[0])
     h_cells = torch.zeros(3, 8, 3)
     h_cells[:, cell] = sim.state.h_B[:, 0] / sim.h_scale_Nms
     phys = PhysState(sim.state.q_BN, sim.q_TN, sim.state.omega_B, h_cells)
-    obs = cell_observation(torch.as_tensor(grid).long().expand(3, 2, 2, 2), torch.full((3,), 3), 3, phys,
-                           spec.mission.rate_limit_rad_s)
-    torch.testing.assert_close(flat_state(sim), obs.x[:, cell, N_COMMON + N_DESIGN:])
+    obs = cell_observation(
+        torch.as_tensor(grid).long().expand(3, 2, 2, 2), torch.full((3,), 3), 3, phys, spec.mission.rate_limit_rad_s
+    )
+    torch.testing.assert_close(flat_state(sim), obs.x[:, cell, N_COMMON + N_DESIGN :])
 
 
 def test_cli_bench_control_trains_evaluates_and_compares_with_pd(tiny, tmp_path, capsys):
     spec_path = tmp_path / "tiny.json"
     spec_path.write_text(tiny().model_dump_json())
     out = tmp_path / "reports" / "control.json"
-    assert main(["bench", "control", str(spec_path), "--steps", "400", "--eval-every", "200", "--hidden", "8", "8",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "control",
+                str(spec_path),
+                "--steps",
+                "400",
+                "--eval-every",
+                "200",
+                "--hidden",
+                "8",
+                "8",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     report = json.loads(out.read_text())
     assert json.loads(capsys.readouterr().out) == report
     assert report["hidden_sizes"] == [8, 8] and report["env_steps"] <= 400 and report["updates"] > 0

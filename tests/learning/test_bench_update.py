@@ -23,8 +23,10 @@ def test_report_has_every_network_and_its_ratio_to_flat_per_grid():
 
 
 def test_cli_prints_json_and_rejects_bad_sizes(capsys):
-    assert main(["bench", "update", "--json", "--grids", "2", "--hidden", "8", "8", "--batch-size", "4",
-                 "--rounds", "1"]) == 0
+    assert (
+        main(["bench", "update", "--json", "--grids", "2", "--hidden", "8", "8", "--batch-size", "4", "--rounds", "1"])
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert set(out["results"]["2x2x2"]) >= {"flat_ms", "per-module_ms", "set_ms", "set_ratio", "per-module_ratio"}
     with pytest.raises(SystemExit, match="--grids between"):

@@ -36,8 +36,13 @@ def test_a_crafted_pickle_checkpoint_is_refused_with_a_clear_error():
 def _run_with_a_best(tiny) -> TD3Run:
     run = TD3Run(tiny())
     grid = run.current_grid()
-    run.best = {"mean_return": -1.0, "success_rate": 0.0, "env_steps": 0, "grid": np.asarray(grid, dtype=np.int64),
-                "actor": {k: v.clone() for k, v in run.agent.actor.state_dict().items()}}
+    run.best = {
+        "mean_return": -1.0,
+        "success_rate": 0.0,
+        "env_steps": 0,
+        "grid": np.asarray(grid, dtype=np.int64),
+        "actor": {k: v.clone() for k, v in run.agent.actor.state_dict().items()},
+    }
     return run
 
 

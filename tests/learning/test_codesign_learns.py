@@ -37,9 +37,11 @@ def test_codesign_on_quick_beats_the_untrained_policy_and_random_designs():
     base = untrained_baselines(spec, designs=8)
     own = base["untrained_policy"]["mean_return"]
     rand = base["random_designs"]
-    print(f"trained {trained['mean_return']:.1f} (violations {trained['safety_violations']}, median error "
-          f"{trained['median_final_error_deg']:.1f} deg, success {trained['success_rate']:.2f}); untrained own design "
-          f"{own:.1f}; random designs mean {rand['mean_return']:.1f}, best {rand['best_mean_return']:.1f}")
+    print(
+        f"trained {trained['mean_return']:.1f} (violations {trained['safety_violations']}, median error "
+        f"{trained['median_final_error_deg']:.1f} deg, success {trained['success_rate']:.2f}); untrained own design "
+        f"{own:.1f}; random designs mean {rand['mean_return']:.1f}, best {rand['best_mean_return']:.1f}"
+    )
     assert res.summary["design"]["valid"]
     assert trained["mean_return"] >= max(own, rand["best_mean_return"]) + MARGIN
     # Every random design breaks the rate limit on every slew under the untrained controller.

@@ -45,10 +45,22 @@ def test_export_matches_in_process_policy(tmp_path, network):
     assert sim.state.h_B.abs().sum() > 0 and sim.state.omega_B.abs().sum() > 0
 
     (tmp_path / "policy_export.pt").write_bytes(export_torchscript(actor, grid, spec))
-    torch.save({"q_BT": sim.error_quaternion().float(), "omega_B": sim.state.omega_B.float(),
-                "h_B": sim.state.h_B.float()}, tmp_path / "state.pt")
-    subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path / "policy_export.pt"), str(tmp_path / "state.pt"),
-                    str(tmp_path / "out.pt")], check=True, cwd=tmp_path)
+    torch.save(
+        {"q_BT": sim.error_quaternion().float(), "omega_B": sim.state.omega_B.float(), "h_B": sim.state.h_B.float()},
+        tmp_path / "state.pt",
+    )
+    subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            SCRIPT,
+            str(tmp_path / "policy_export.pt"),
+            str(tmp_path / "state.pt"),
+            str(tmp_path / "out.pt"),
+        ],
+        check=True,
+        cwd=tmp_path,
+    )
     got = torch.load(tmp_path / "out.pt")
     assert got.shape == (16, 3, 3)
     torch.testing.assert_close(got, expected.float(), atol=1e-5, rtol=1e-5)

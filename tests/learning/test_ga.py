@@ -15,9 +15,17 @@ from .conftest import tiny_spec
 
 
 def test_ga_designs_schedule_and_budget():
-    spec = tiny_spec(algorithm="ga", training__total_env_steps=1000, ga={
-        "population_size": 5, "steps_per_design": 64, "survivor_start": 0.6, "survivor_end": 0.0,
-        "mutation_rate": 0.3})
+    spec = tiny_spec(
+        algorithm="ga",
+        training__total_env_steps=1000,
+        ga={
+            "population_size": 5,
+            "steps_per_design": 64,
+            "survivor_start": 0.6,
+            "survivor_end": 0.0,
+            "mutation_rate": 0.3,
+        },
+    )
     result = train(spec)
     curve = json.loads(result.artifacts()["curve.json"])
     designs, generations = curve["designs"], curve["generations"]

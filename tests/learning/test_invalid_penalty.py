@@ -16,16 +16,26 @@ from .conftest import tiny_spec
 
 @settings(max_examples=200, deadline=None)
 @given(
-    penalty=st.floats(-1e6, 0.0), steps=st.integers(1, 5000), safety=st.floats(0.0, 1e4),
-    per_remaining=st.floats(0.0, 100.0), no_progress=st.floats(0.0, 100.0),
+    penalty=st.floats(-1e6, 0.0),
+    steps=st.integers(1, 5000),
+    safety=st.floats(0.0, 1e4),
+    per_remaining=st.floats(0.0, 100.0),
+    no_progress=st.floats(0.0, 100.0),
 )
 def test_penalty_is_below_the_worst_valid_return(penalty, steps, safety, per_remaining, no_progress):
-    spec = JobSpec.model_validate({
-        "design": {"invalid_penalty": penalty},
-        "mission": {"episode_steps": steps, "reward": {
-            "safety_penalty": safety, "safety_penalty_per_remaining_step": per_remaining,
-            "no_progress_penalty": no_progress}},
-    })
+    spec = JobSpec.model_validate(
+        {
+            "design": {"invalid_penalty": penalty},
+            "mission": {
+                "episode_steps": steps,
+                "reward": {
+                    "safety_penalty": safety,
+                    "safety_penalty_per_remaining_step": per_remaining,
+                    "no_progress_penalty": no_progress,
+                },
+            },
+        }
+    )
     low, high = return_bounds(spec.mission)
     assert effective_invalid_penalty(spec) < low <= high
 

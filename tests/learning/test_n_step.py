@@ -8,8 +8,14 @@ import torch
 
 from modsat_core.td3 import ReplayBuffer
 
-FIELDS = {"reward": ((), torch.float32), "terminal": ((), torch.bool), "done": ((), torch.bool),
-          "obs_t": ((), torch.int64), "obs_e": ((), torch.int64), "next_t": ((), torch.int64)}
+FIELDS = {
+    "reward": ((), torch.float32),
+    "terminal": ((), torch.bool),
+    "done": ((), torch.bool),
+    "obs_t": ((), torch.int64),
+    "obs_e": ((), torch.int64),
+    "next_t": ((), torch.int64),
+}
 B, G = 2, 0.9
 
 
@@ -17,10 +23,16 @@ def _buffer(capacity: int, steps: int, done_at: dict[int, set[int]], terminal_at
     """B episodes side by side; env e's reward at step t is 10 e + t; obs/next carry t."""
     buf = ReplayBuffer(FIELDS, capacity)
     for t in range(steps):
-        buf.add({"reward": torch.tensor([10.0 * e + t for e in range(B)]),
-                 "terminal": torch.tensor([t in terminal_at.get(e, ()) for e in range(B)]),
-                 "done": torch.tensor([t in done_at.get(e, ()) or t in terminal_at.get(e, ()) for e in range(B)]),
-                 "obs_t": torch.tensor([t] * B), "obs_e": torch.arange(B), "next_t": torch.tensor([t + 1] * B)})
+        buf.add(
+            {
+                "reward": torch.tensor([10.0 * e + t for e in range(B)]),
+                "terminal": torch.tensor([t in terminal_at.get(e, ()) for e in range(B)]),
+                "done": torch.tensor([t in done_at.get(e, ()) or t in terminal_at.get(e, ()) for e in range(B)]),
+                "obs_t": torch.tensor([t] * B),
+                "obs_e": torch.arange(B),
+                "next_t": torch.tensor([t + 1] * B),
+            }
+        )
     return buf
 
 

@@ -17,9 +17,18 @@ pytestmark = pytest.mark.slow  # trains TD3 on Pendulum-v1
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_td3_solves_pendulum(seed):
-    curve = train_gym("Pendulum-v1", seed=seed, total_steps=20_000, learning_starts=1_000, hidden=(64, 64),
-                      batch_size=128, eval_every=1_000, eval_episodes=10, target_return=-200.0,
-                      cfg=TD3Config(actor_lr=1e-3, critic_lr=1e-3))
+    curve = train_gym(
+        "Pendulum-v1",
+        seed=seed,
+        total_steps=20_000,
+        learning_starts=1_000,
+        hidden=(64, 64),
+        batch_size=128,
+        eval_every=1_000,
+        eval_episodes=10,
+        target_return=-200.0,
+        cfg=TD3Config(actor_lr=1e-3, critic_lr=1e-3),
+    )
     steps, best = curve[-1][0], max(r for _, r in curve)
     print(f"seed {seed}: best evaluation return {best:.1f} at {steps} env steps")
     assert best >= -200.0, curve

@@ -22,8 +22,7 @@ from modsat_core.train import train
 
 from .conftest import tiny_spec
 
-EXPECTED = {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.json", "trajectories.json",
-            "policy.pt"}
+EXPECTED = {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.json", "trajectories.json", "policy.pt"}
 
 
 @pytest.mark.parametrize("network", NETWORKS)
@@ -72,16 +71,24 @@ def test_same_seed_same_curve_on_cpu(network):
     assert c != a
 
 
-@pytest.mark.parametrize("network,explored,n_step", [(n, 1.0, 1) for n in NETWORKS] + [("set", 0.5, 1),
-                                                                                          ("set", 1.0, 3)])
+@pytest.mark.parametrize(
+    "network,explored,n_step", [(n, 1.0, 1) for n in NETWORKS] + [("set", 0.5, 1), ("set", 1.0, 3)]
+)
 def test_stop_and_resume_continues_from_the_checkpoint(network, explored, n_step):
-    spec = tiny_spec(training__network=network, training__design_exploration_episodes=explored,
-                     training__exploration_noise_final=0.0, training__design_exploration_final=0.0,
-                     training__n_step=n_step, design__repair=n_step > 1)  # repaired designs fly: returns vary
+    spec = tiny_spec(
+        training__network=network,
+        training__design_exploration_episodes=explored,
+        training__exploration_noise_final=0.0,
+        training__design_exploration_final=0.0,
+        training__n_step=n_step,
+        design__repair=n_step > 1,
+    )  # repaired designs fly: returns vary
     full = train(spec)
     if n_step > 1:  # the n-step targets are really used
-        assert full.curve != train(spec.model_copy(update={"training": spec.training.model_copy(
-            update={"n_step": 1})})).curve
+        assert (
+            full.curve
+            != train(spec.model_copy(update={"training": spec.training.model_copy(update={"n_step": 1})})).curve
+        )
     ckpts: list[bytes] = []
     seen = []
 
@@ -112,8 +119,9 @@ def test_stop_and_resume_continues_from_the_checkpoint(network, explored, n_step
 def test_ga_run_stops_and_resumes():
     spec = tiny_spec(algorithm="ga", training__total_env_steps=320)
     ckpts: list[bytes] = []  # as the worker keeps them: bytes, read back with weights_only
-    first = train(spec, on_checkpoint=lambda ck: ckpts.append(checkpoint_to_bytes(ck)),
-                  should_stop=lambda: len(ckpts) >= 3)
+    first = train(
+        spec, on_checkpoint=lambda ck: ckpts.append(checkpoint_to_bytes(ck)), should_stop=lambda: len(ckpts) >= 3
+    )
     assert first.stopped
     second = train(spec, checkpoint=checkpoint_from_bytes(ckpts[-1]))
     assert not second.stopped and second.env_steps == 320
@@ -126,8 +134,9 @@ def test_replay_buffer_of_5x5x5_for_5e5_transitions_is_under_2_GB():
     assert n < 2 * 2**30
     small = ReplayBuffer(replay_fields(5), 100)  # the formula is what the buffer allocates
     assert small.nbytes == replay_buffer_bytes(5, 100)
-    assert all(t.dtype in (torch.uint8, torch.int16, torch.float16, torch.float32, torch.bool)
-               for t in small.data.values())
+    assert all(
+        t.dtype in (torch.uint8, torch.int16, torch.float16, torch.float32, torch.bool) for t in small.data.values()
+    )
 
 
 def test_a_policy_file_from_before_the_network_choice_is_refused_with_a_reason():
@@ -150,8 +159,12 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
     from modsat_core.td3_run import TD3Run
 
     def grown(share: float) -> tuple[list, np.ndarray]:
-        spec = tiny_spec(training__learning_starts=0, training__design_exploration=0.5,
-                         training__design_exploration_episodes=share, design__repair=True)
+        spec = tiny_spec(
+            training__learning_starts=0,
+            training__design_exploration=0.5,
+            training__design_exploration_episodes=share,
+            design__repair=True,
+        )
         run = TD3Run(spec)
         for _ in range(spec.design.design_steps):
             run.env.step(run._act(run.env.observe()))
@@ -177,5 +190,6 @@ def test_design_layers_hold_until_design_learning_starts():
     assert moved and all(k.startswith("control.") for k in moved), sorted(moved)
     free = TD3Run(tiny_spec(training__network="set", design__repair=True))
     free.run(lambda _p: None, lambda _c: None, lambda: False)
-    assert any(k.startswith("design.") and not torch.equal(before[k], v)
-               for k, v in free.agent.actor.state_dict().items())
+    assert any(
+        k.startswith("design.") and not torch.equal(before[k], v) for k, v in free.agent.actor.state_dict().items()
+    )

@@ -73,15 +73,27 @@ class ServerProc(HttpProc):
         self.log_path = log_path
         self._log = open(log_path, "wb")  # closed in stop()
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", "server.app:create_app", "--factory", "--host", "127.0.0.1",
-             "--port", str(self.port), "--timeout-graceful-shutdown", "2"],
+            [
+                sys.executable,
+                "-m",
+                "uvicorn",
+                "server.app:create_app",
+                "--factory",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(self.port),
+                "--timeout-graceful-shutdown",
+                "2",
+            ],
             # The live viewer is tested in tests/web; here it would only take a port.
-            cwd=REPO, env={**os.environ, **FAST_ENV, "MODSAT_VIEWER": "false", "MODSAT_DB_URL": db_url, **(env or {})},
-            stdout=self._log, stderr=subprocess.STDOUT,
+            cwd=REPO,
+            env={**os.environ, **FAST_ENV, "MODSAT_VIEWER": "false", "MODSAT_DB_URL": db_url, **(env or {})},
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
         )
         wait_for(self._up, 30, f"the API server on port {self.port}")
         self.client = httpx.Client(base_url=self.base, timeout=30)
-
 
 
 @pytest.fixture
@@ -92,8 +104,10 @@ def start_server(tmp_path, request):
         return ServerProc(db_url, tmp_path / f"server{i}.log", env)
 
     yield from process_factory(
-        request, make,
-        lambda s: f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}")
+        request,
+        make,
+        lambda s: f"----- log of the API server on port {s.port}\n{s.log_path.read_text(errors='replace')}",
+    )
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])

@@ -21,8 +21,14 @@ def test_submit_preset_returns_201_with_location(api):
     assert job["status"] == "queued" and job["name"] == "quick"
     assert job["spec"]["training"]["total_env_steps"] == 400
     assert job["spec"]["training"]["hidden_sizes"] == [256, 256], "the rest comes from the preset"
-    assert job["progress"] == {"env_steps": 0, "total_env_steps": 400, "fraction": 0.0, "phase": None,
-                               "checkpoint_env_steps": None, "run_seconds": 0.0}
+    assert job["progress"] == {
+        "env_steps": 0,
+        "total_env_steps": 400,
+        "fraction": 0.0,
+        "phase": None,
+        "checkpoint_env_steps": None,
+        "run_seconds": 0.0,
+    }
     again = api.client.get(r.headers["location"]).json()
     assert again["id"] == job["id"] and again["spec"] == job["spec"]
 
@@ -36,17 +42,20 @@ def test_submit_whole_spec(api):
     assert r.json()["spec"]["seed"] == 42 and r.json()["name"] == "my run"
 
 
-@pytest.mark.parametrize("body, field, words", [
-    ({"training": {"total_env_steps": 0}}, "training.total_env_steps", ">= 1"),
-    ({"design": {"grid_size": 11}}, "design.grid_size", "<= 10"),
-    ({"algorithm": "ppo"}, "algorithm", "td3-codesign"),
-    ({"trainig": {}}, "trainig", "unknown field"),
-    ({"preset": "quick", "overrides": {"mission": {"slew_max_deg": 200}}}, "mission.slew_max_deg", "<= 180"),
-    ({"preset": "nope"}, "preset", "known: "),
-    ({"preset": "quick", "overrides": [1]}, "overrides", "expected an object"),
-    ({"preset": "quick", "seed": 3}, "seed", "inside 'overrides'"),
-    ([1, 2], "body", "expected a JSON object"),
-])
+@pytest.mark.parametrize(
+    "body, field, words",
+    [
+        ({"training": {"total_env_steps": 0}}, "training.total_env_steps", ">= 1"),
+        ({"design": {"grid_size": 11}}, "design.grid_size", "<= 10"),
+        ({"algorithm": "ppo"}, "algorithm", "td3-codesign"),
+        ({"trainig": {}}, "trainig", "unknown field"),
+        ({"preset": "quick", "overrides": {"mission": {"slew_max_deg": 200}}}, "mission.slew_max_deg", "<= 180"),
+        ({"preset": "nope"}, "preset", "known: "),
+        ({"preset": "quick", "overrides": [1]}, "overrides", "expected an object"),
+        ({"preset": "quick", "seed": 3}, "seed", "inside 'overrides'"),
+        ([1, 2], "body", "expected a JSON object"),
+    ],
+)
 def test_invalid_spec_is_422_naming_the_field(api, body, field, words):
     r = api.client.post("/api/jobs", json=body)
     assert r.status_code == 422, r.text
@@ -77,9 +86,16 @@ def test_oversized_body_is_413_declared_and_chunked(api):
 
 
 def test_unknown_job_is_404_everywhere(api):
-    for path in ("/api/jobs/999999", "/api/jobs/999999/metrics", "/api/jobs/999999/events",
-                 "/api/jobs/999999/artifacts", "/api/jobs/999999/artifacts/policy.pt",
-                 "/api/jobs/0", "/api/jobs/-3", f"/api/jobs/{2**80}"):
+    for path in (
+        "/api/jobs/999999",
+        "/api/jobs/999999/metrics",
+        "/api/jobs/999999/events",
+        "/api/jobs/999999/artifacts",
+        "/api/jobs/999999/artifacts/policy.pt",
+        "/api/jobs/0",
+        "/api/jobs/-3",
+        f"/api/jobs/{2**80}",
+    ):
         r = api.client.get(path)
         assert r.status_code == 404, (path, r.text)
         assert "no job" in r.json()["detail"]
@@ -163,8 +179,12 @@ def test_presets_schema_health_and_page(api):
     assert "/api/jobs" in api.client.get("/app.js").text, "the web UI reads the API"
     assert api.client.get("/viser-client/").status_code == 200, "viser's static client is served"
     assert api.client.get("/no-such-file.js").status_code == 404
-    assert api.client.get("/api/viewer").json() == {"enabled": False, "port": None, "client": "/viser-client/",
-                                                     "recording": "evaluation.viser"}
+    assert api.client.get("/api/viewer").json() == {
+        "enabled": False,
+        "port": None,
+        "client": "/viser-client/",
+        "recording": "evaluation.viser",
+    }
 
 
 def test_writes_need_the_bearer_token_when_set(start_server, sqlite_url):

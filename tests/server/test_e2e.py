@@ -21,14 +21,29 @@ TINY_QUICK = {
     "preset": "quick",
     "overrides": {
         "name": "e2e",
-        "training": {"total_env_steps": 600, "learning_starts": 200, "eval_every_steps": 300,
-                     "checkpoint_every_steps": 200, "train_frequency": 16, "batch_size": 32,
-                     "hidden_sizes": [32, 32]},
+        "training": {
+            "total_env_steps": 600,
+            "learning_starts": 200,
+            "eval_every_steps": 300,
+            "checkpoint_every_steps": 200,
+            "train_frequency": 16,
+            "batch_size": 32,
+            "hidden_sizes": [32, 32],
+        },
         "evaluation": {"episodes": 2, "trajectories": 1},
     },
 }
-OUTPUTS = {"spec.json", "curve.json", "curve.png", "design.json", "evaluation.json", "trajectories.json",
-           "policy.pt", "policy_export.pt", "evaluation.viser"}
+OUTPUTS = {
+    "spec.json",
+    "curve.json",
+    "curve.png",
+    "design.json",
+    "evaluation.json",
+    "trajectories.json",
+    "policy.pt",
+    "policy_export.pt",
+    "evaluation.viser",
+}
 
 
 def _read_events(base: str, job_id: int, out: list[tuple[str, str]]) -> None:
@@ -116,4 +131,3 @@ def test_quick_preset_over_http(start_server, sqlite_url, spawn_worker):
     assert s.client.get(f"/api/jobs/{job_id}/artifacts/curve.png").content.startswith(b"\x89PNG")
     design = s.client.get(f"/api/jobs/{job_id}/artifacts/design.json").json()
     assert design["grid_size"] == 3
-

@@ -31,11 +31,13 @@ def api_schema(fuzz_server):
 @pytest.mark.parametrize("mode", [GenerationMode.POSITIVE, GenerationMode.NEGATIVE], ids=["valid", "invalid"])
 def test_no_server_errors(api_schema, mode):
     @given(case=api_schema.as_strategy(mode))
-    @settings(max_examples=150, deadline=None, phases=[Phase.generate], suppress_health_check=list(HealthCheck),
-              database=None)
+    @settings(
+        max_examples=150, deadline=None, phases=[Phase.generate], suppress_health_check=list(HealthCheck), database=None
+    )
     def check(case) -> None:
         response = case.call(timeout=30)
         assert response.status_code < 500, (
-            f"{case.method} {case.formatted_path} {case.query} -> {response.status_code}: {response.text[:500]}")
+            f"{case.method} {case.formatted_path} {case.query} -> {response.status_code}: {response.text[:500]}"
+        )
 
     check()

@@ -23,6 +23,7 @@ def _raw(api, method: str, path: str, body: bytes = b"", **headers: str) -> http
 
 # ----------------------------------------------------------------------------- other web pages
 
+
 def test_simple_cross_site_post_is_refused(api):
     """What a page on another site can send without a preflight: text/plain or a form, with its Origin."""
     body = json.dumps(TINY).encode()
@@ -44,8 +45,13 @@ def test_simple_cross_site_post_is_refused(api):
 
 def test_same_origin_and_non_browser_writes_work(api):
     body = json.dumps(TINY).encode()
-    r = _raw(api, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": api.base,
-                                                 "sec-fetch-site": "same-origin"})
+    r = _raw(
+        api,
+        "POST",
+        "/api/jobs",
+        body,
+        **{"content-type": "application/json", "origin": api.base, "sec-fetch-site": "same-origin"},
+    )
     assert r.status_code == 201, r.text
     job_id = r.json()["id"]
     r = _raw(api, "POST", f"/api/jobs/{job_id}/cancel", origin=EVIL)
@@ -69,15 +75,19 @@ def test_foreign_host_header_is_refused_for_reads_too(api):
 
 
 def test_allowed_hosts_and_origins_are_settings(start_server, sqlite_url):
-    s = start_server(sqlite_url, env={"MODSAT_ALLOWED_HOSTS": "sat.lab.example, 10.0.0.5",
-                                      "MODSAT_ALLOWED_ORIGINS": "https://ops.lab.example"})
+    s = start_server(
+        sqlite_url,
+        env={"MODSAT_ALLOWED_HOSTS": "sat.lab.example, 10.0.0.5", "MODSAT_ALLOWED_ORIGINS": "https://ops.lab.example"},
+    )
     assert _raw(s, "GET", "/api/health", host="sat.lab.example:8000").status_code == 200
     assert _raw(s, "GET", "/api/health", host="10.0.0.5").status_code == 200
     assert _raw(s, "GET", "/api/health", host="evil.example").status_code == 400
     body = json.dumps(TINY).encode()
     r = _raw(s, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": "https://ops.lab.example"})
     assert r.status_code == 201, r.text
-    r = _raw(s, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": "https://ops.lab.example.evil"})
+    r = _raw(
+        s, "POST", "/api/jobs", body, **{"content-type": "application/json", "origin": "https://ops.lab.example.evil"}
+    )
     assert r.status_code == 403
 
 
@@ -92,30 +102,46 @@ def test_an_empty_token_is_an_error_not_the_token_empty(monkeypatch):
 
 # ----------------------------------------------------------------------------- specs that exhaust the host
 
+
 def _preset(**sections) -> dict:
     return {"preset": "quick", "overrides": sections}
 
 
-@pytest.mark.parametrize("body, field, words", [
-    # the issue's examples: a 10^3 grid with a 500,000-transition buffer is 9.4 GiB before the first step
-    (_preset(design={"grid_size": 10}, training={"buffer_size": 500_000, "total_env_steps": 1_000_000}),
-     "training.buffer_size", "GiB of memory"),
-    (_preset(design={"grid_size": 10}, training={"buffer_size": 10_000_000, "total_env_steps": 20_000_000}),
-     "training.buffer_size", "MODSAT_MAX_JOB_MEMORY_GIB"),
-    (_preset(training={"total_env_steps": 1_000_000_000}), "training.total_env_steps", "MODSAT_MAX_ENV_STEPS"),
-    (_preset(design={"grid_size": 10}, training={"num_envs": 8192}), "training.num_envs", "GiB of memory"),
-    (_preset(mission={"episode_steps": 100_000}, evaluation={"episodes": 10_000}), "evaluation.episodes",
-     "MODSAT_MAX_EVALUATION_STEPS"),
-    (_preset(training={"eval_every_steps": 1}), "training.eval_every_steps", "control steps"),
-    (_preset(mission={"episode_steps": 100_000}, evaluation={"trajectories": 50, "episodes": 50}),
-     "evaluation.trajectories", "recorded steps"),
-    # batch larger than the buffer: could never run
-    (_preset(training={"batch_size": 65536, "buffer_size": 100}), "training.buffer_size", "at least batch_size"),
-    # strict types
-    (_preset(seed="3"), "seed", "valid integer"),
-    (_preset(training={"total_env_steps": True}), "training.total_env_steps", "valid integer"),
-    (_preset(training={"total_env_steps": 400.0}), "training.total_env_steps", "valid integer"),
-])
+@pytest.mark.parametrize(
+    "body, field, words",
+    [
+        # the issue's examples: a 10^3 grid with a 500,000-transition buffer is 9.4 GiB before the first step
+        (
+            _preset(design={"grid_size": 10}, training={"buffer_size": 500_000, "total_env_steps": 1_000_000}),
+            "training.buffer_size",
+            "GiB of memory",
+        ),
+        (
+            _preset(design={"grid_size": 10}, training={"buffer_size": 10_000_000, "total_env_steps": 20_000_000}),
+            "training.buffer_size",
+            "MODSAT_MAX_JOB_MEMORY_GIB",
+        ),
+        (_preset(training={"total_env_steps": 1_000_000_000}), "training.total_env_steps", "MODSAT_MAX_ENV_STEPS"),
+        (_preset(design={"grid_size": 10}, training={"num_envs": 8192}), "training.num_envs", "GiB of memory"),
+        (
+            _preset(mission={"episode_steps": 100_000}, evaluation={"episodes": 10_000}),
+            "evaluation.episodes",
+            "MODSAT_MAX_EVALUATION_STEPS",
+        ),
+        (_preset(training={"eval_every_steps": 1}), "training.eval_every_steps", "control steps"),
+        (
+            _preset(mission={"episode_steps": 100_000}, evaluation={"trajectories": 50, "episodes": 50}),
+            "evaluation.trajectories",
+            "recorded steps",
+        ),
+        # batch larger than the buffer: could never run
+        (_preset(training={"batch_size": 65536, "buffer_size": 100}), "training.buffer_size", "at least batch_size"),
+        # strict types
+        (_preset(seed="3"), "seed", "valid integer"),
+        (_preset(training={"total_env_steps": True}), "training.total_env_steps", "valid integer"),
+        (_preset(training={"total_env_steps": 400.0}), "training.total_env_steps", "valid integer"),
+    ],
+)
 def test_specs_a_host_cannot_take_are_422_naming_the_field(api, body, field, words):
     before = api.client.get("/api/jobs").json()["total"]
     r = api.client.post("/api/jobs", json=body)
@@ -147,6 +173,7 @@ def test_queue_cap_is_429(start_server, sqlite_url):
 
 # ----------------------------------------------------------------------------- deleting, downloads, 404s
 
+
 def test_delete_queued_and_ended_jobs_not_running_ones(start_server, sqlite_url, spawn_worker):
     s = start_server(sqlite_url)
     queued = s.client.post("/api/jobs", json=TINY).json()["id"]
@@ -155,8 +182,10 @@ def test_delete_queued_and_ended_jobs_not_running_ones(start_server, sqlite_url,
     assert s.client.get(f"/api/jobs/{queued}/metrics").status_code == 404
     assert s.client.delete(f"/api/jobs/{queued}").status_code == 404
     assert s.client.delete("/api/jobs/99999999").status_code == 404
-    long = {"preset": "quick", "overrides": {"training": {"total_env_steps": 1_000_000,
-                                                           "checkpoint_every_steps": 1_000_000}}}
+    long = {
+        "preset": "quick",
+        "overrides": {"training": {"total_env_steps": 1_000_000, "checkpoint_every_steps": 1_000_000}},
+    }
     running = s.client.post("/api/jobs", json=long).json()["id"]
     spawn_worker(sqlite_url, "simulated")
     wait_for(lambda: s.client.get(f"/api/jobs/{running}").json()["status"] == "running", 30, "the job to run")
@@ -198,7 +227,13 @@ def test_openapi_declares_the_bearer_token_only_when_one_is_set(api, start_serve
     assert "security" not in post and "401" not in post["responses"]
     assert "securitySchemes" not in open_schema["components"]
     assert open_schema["components"]["schemas"]["PresetSubmission"]["properties"]["preset"]["enum"] == [
-        "paper-3x3x3", "paper-5x5x5", "ga-3x3x3", "ga-5x5x5", "quick", "cpu-3x3x3"]
+        "paper-3x3x3",
+        "paper-5x5x5",
+        "ga-3x3x3",
+        "ga-5x5x5",
+        "quick",
+        "cpu-3x3x3",
+    ]
     s = start_server(sqlite_url, env={"MODSAT_API_TOKEN": "s3cret"})
     closed = s.client.get("/api/openapi.json").json()
     assert closed["paths"]["/api/jobs"]["post"]["security"] and "securitySchemes" in closed["components"]

@@ -25,9 +25,21 @@ class Serve:
         self.log_path = log
         self._log = open(log, "wb")
         self.proc = subprocess.Popen(
-            [MODSAT, "serve", "--workers", str(workers), "--data-dir", str(data_dir), "--port", str(self.port),
-             "--runner", "simulated"],
-            env={**os.environ, **FAST_ENV}, stdout=self._log, stderr=subprocess.STDOUT,
+            [
+                MODSAT,
+                "serve",
+                "--workers",
+                str(workers),
+                "--data-dir",
+                str(data_dir),
+                "--port",
+                str(self.port),
+                "--runner",
+                "simulated",
+            ],
+            env={**os.environ, **FAST_ENV},
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
             start_new_session=True,  # its own process group, like a terminal's foreground job
         )
         wait_for(self._up, 30, "modsat serve to answer")
@@ -67,8 +79,13 @@ class Serve:
 
 
 def _submit(s: Serve, steps: int, checkpoint_every: int = 100_000) -> int:
-    r = s.client.post("/api/jobs", json={"preset": "quick", "overrides": {
-        "training": {"total_env_steps": steps, "checkpoint_every_steps": checkpoint_every}}})
+    r = s.client.post(
+        "/api/jobs",
+        json={
+            "preset": "quick",
+            "overrides": {"training": {"total_env_steps": steps, "checkpoint_every_steps": checkpoint_every}},
+        },
+    )
     assert r.status_code == 201, r.text
     return r.json()["id"]
 
@@ -112,7 +129,9 @@ def test_ctrl_c_and_restart_keep_every_job(tmp_path):
     try:
         job = wait_for(lambda: (j := s3.job(long))["status"] == "succeeded" and j, 60, "the long job to finish")
         assert [(a["outcome"], a["resumed_from_env_steps"]) for a in job["attempts"]] == [
-            ("released", None), ("succeeded", checkpoint)]
+            ("released", None),
+            ("succeeded", checkpoint),
+        ]
     finally:
         assert s3.ctrl_c() == 0
 
@@ -125,9 +144,24 @@ def test_a_taken_port_is_reported_before_anything_starts(tmp_path):
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        r = subprocess.run([MODSAT, "serve", "--workers", "1", "--data-dir", str(tmp_path / "d"), "--port", str(port),
-                            "--viewer-port", "0"], capture_output=True, text=True, timeout=60,
-                           env={**os.environ, **FAST_ENV})
+        r = subprocess.run(
+            [
+                MODSAT,
+                "serve",
+                "--workers",
+                "1",
+                "--data-dir",
+                str(tmp_path / "d"),
+                "--port",
+                str(port),
+                "--viewer-port",
+                "0",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, **FAST_ENV},
+        )
     assert r.returncode == 1
     assert f"cannot listen on 127.0.0.1:{port}" in r.stderr and "--port" in r.stderr, r.stderr
     assert "worker" not in r.stdout and "viewer" not in r.stdout.lower(), r.stdout

@@ -36,16 +36,25 @@ CUBE = np.ones((3, 3, 3), dtype=np.int64)
 CUBE[1, 1, 1] = 2
 ALL_ACTUATORS = np.full((3, 3, 3), 2, dtype=np.int64)  # 27 units: three Basilisk wheel effectors
 ASYMMETRIC = np.zeros((3, 3, 3), dtype=np.int64)
-for cell, kind in (((0, 0, 0), 1), ((1, 0, 0), 2), ((2, 0, 0), 1), ((2, 1, 0), 1), ((2, 2, 0), 1), ((2, 2, 1), 2),
-                   ((1, 2, 1), 1)):
+for cell, kind in (
+    ((0, 0, 0), 1),
+    ((1, 0, 0), 2),
+    ((2, 0, 0), 1),
+    ((2, 1, 0), 1),
+    ((2, 2, 0), 1),
+    ((2, 2, 1), 2),
+    ((1, 2, 1), 1),
+):
     ASYMMETRIC[cell] = kind
 DESIGNS = {"cube": CUBE, "asymmetric": ASYMMETRIC, "all-actuators": ALL_ACTUATORS}
 
 
 @pytest.fixture(scope="module")
 def verify():
-    pytest.importorskip("Basilisk.simulation.reactionWheelStateEffector",
-                        reason="Basilisk is not installed: pip install -e '.[basilisk]'")
+    pytest.importorskip(
+        "Basilisk.simulation.reactionWheelStateEffector",
+        reason="Basilisk is not installed: pip install -e '.[basilisk]'",
+    )
     from modsat_core import verify
 
     return verify
@@ -65,8 +74,15 @@ def test_the_asymmetric_design_has_products_of_inertia():
     assert np.all(np.abs(I[~np.eye(3, dtype=bool)]) > 1e-3)
 
 
-@pytest.mark.parametrize("design,model", [("cube", "reaction-wheel"), ("asymmetric", "reaction-wheel"),
-                                          ("asymmetric", "ideal-torque"), ("all-actuators", "reaction-wheel")])
+@pytest.mark.parametrize(
+    "design,model",
+    [
+        ("cube", "reaction-wheel"),
+        ("asymmetric", "reaction-wheel"),
+        ("asymmetric", "ideal-torque"),
+        ("all-actuators", "reaction-wheel"),
+    ],
+)
 def test_pd_flies_the_same_slews_in_both(verify, design, model):
     spec, grid, n = slew_spec(model), DESIGNS[design], 3 if design == "cube" else 2
     draws = verify.evaluation_draws(spec, n)
@@ -79,8 +95,15 @@ def test_pd_flies_the_same_slews_in_both(verify, design, model):
         return
     assert c["modsat"]["success_rate"] == 1.0  # the PD baseline lands these slews: a real closed loop
     # The modsat column is modsat's own Monte-Carlo evaluation of the same slews.
-    mc = monte_carlo(Design.from_grid(grid, spec.modules), PDController, spec.mission, spec.modules, episodes=n,
-                     seed=spec.evaluation.seed, dtype=torch.float64)
+    mc = monte_carlo(
+        Design.from_grid(grid, spec.modules),
+        PDController,
+        spec.mission,
+        spec.modules,
+        episodes=n,
+        seed=spec.evaluation.seed,
+        dtype=torch.float64,
+    )
     for ours, row in zip((s["modsat"] for s in c["slews"]), mc.episodes):
         for key in ("success", "final_error_deg", "settling_time_s", "peak_rate_rad_s", "safety_violation"):
             assert ours[key] == pytest.approx(row[key], rel=1e-12), key
@@ -115,8 +138,15 @@ def trained_run(tmp_path_factory, verify):
 
     d = get_preset("quick").model_dump(mode="json")
     d["modules"]["module_mass_kg"] = 100.0
-    d["training"].update(total_env_steps=480, learning_starts=320, hidden_sizes=[32, 32], batch_size=32,
-                         eval_every_steps=10**6, eval_episodes=1, checkpoint_every_steps=10**6)
+    d["training"].update(
+        total_env_steps=480,
+        learning_starts=320,
+        hidden_sizes=[32, 32],
+        batch_size=32,
+        eval_every_steps=10**6,
+        eval_episodes=1,
+        checkpoint_every_steps=10**6,
+    )
     d["evaluation"].update(episodes=2, trajectories=0)
     result = train(JobSpec.model_validate(d))
     out = tmp_path_factory.mktemp("quick-run")
@@ -137,8 +167,14 @@ def test_cli_json_report_and_the_policy_flies_identically(trained_run, capsys):
     assert rc == 0
     report = json.loads(out)
     assert report["episodes"] == 2 and set(report["controllers"]) == {"policy", "pd_baseline"}
-    keys = {"success_rate_0_25deg", "success_rate_1deg", "median_final_error_deg", "median_settling_time_s",
-            "max_peak_rate_rad_s", "safety_violations"}
+    keys = {
+        "success_rate_0_25deg",
+        "success_rate_1deg",
+        "median_final_error_deg",
+        "median_settling_time_s",
+        "max_peak_rate_rad_s",
+        "safety_violations",
+    }
     for name, c in report["controllers"].items():
         assert c["available"], name
         assert keys <= set(c["modsat"]) and set(c["modsat"]) == set(c["basilisk"])
@@ -198,9 +234,12 @@ def test_a_run_that_asks_without_basilisk_says_so(monkeypatch, tmp_path):
     from modsat_core import verify as v
 
     monkeypatch.setattr(v, "basilisk_available", lambda: False)
-    files = {"spec.json": get_preset("quick").model_copy(update={"evaluation": get_preset("quick").evaluation
-                                                                 .model_copy(update={"basilisk": True})})
-             .model_dump_json().encode()}
+    files = {
+        "spec.json": get_preset("quick")
+        .model_copy(update={"evaluation": get_preset("quick").evaluation.model_copy(update={"basilisk": True})})
+        .model_dump_json()
+        .encode()
+    }
     assert v.add_verification(files)
     report = json.loads(files[v.ARTIFACT_NAME])
     assert report == {"available": False, "reason": v.BASILISK_MISSING + " (on the machine that trained this run)"}

@@ -20,17 +20,26 @@ def _episode(T: int = 13, dt: float = 1 / 12) -> dict:
     t = np.arange(T) * dt
     angle = np.linspace(np.pi / 2, 0.0, T)  # about z, from 90 deg to the target
     q = np.stack([np.cos(angle / 2), 0 * t, 0 * t, np.sin(angle / 2)], axis=1)
-    return {"t_s": t.tolist(), "q_BN": q.tolist(), "omega_B": np.tile([0, 0, -0.1], (T, 1)).tolist(),
-            "h_B": np.tile([0, 0, 0.002], (T, 1)).tolist(), "tau_c_B": np.zeros((T, 3)).tolist(),
-            "error_deg": np.degrees(angle).tolist(), "q_TN": [1.0, 0.0, 0.0, 0.0],
-            "metrics": {"success": True, "slew_angle_deg": 90.0, "final_error_deg": 0.1}}
+    return {
+        "t_s": t.tolist(),
+        "q_BN": q.tolist(),
+        "omega_B": np.tile([0, 0, -0.1], (T, 1)).tolist(),
+        "h_B": np.tile([0, 0, 0.002], (T, 1)).tolist(),
+        "tau_c_B": np.zeros((T, 3)).tolist(),
+        "error_deg": np.degrees(angle).tolist(),
+        "q_TN": [1.0, 0.0, 0.0, 0.0],
+        "metrics": {"success": True, "slew_angle_deg": 90.0, "final_error_deg": 0.1},
+    }
 
 
 def _files() -> dict[str, bytes]:
     traj = Trajectories.model_validate({"policy": [_episode(), _episode(5)], "pd_baseline": [_episode(), _episode()]})
     spec = {"name": "unit", "algorithm": "td3-codesign"}
-    return {"design.json": DesignReport.of(GRID).to_json(), "trajectories.json": traj.to_json(),
-            "spec.json": json.dumps(spec).encode()}
+    return {
+        "design.json": DesignReport.of(GRID).to_json(),
+        "trajectories.json": traj.to_json(),
+        "spec.json": json.dumps(spec).encode(),
+    }
 
 
 def test_srgb_to_linear_matches_the_standard_formula():
@@ -82,8 +91,10 @@ def test_run_data_refuses_files_not_in_their_format_and_names_them():
     with pytest.raises(ArtefactError, match=r"trajectories.json .*policy\.0.*q_BN must be \(13, 4\)"):
         RunData.from_json(files["design.json"], lopsided)
     with pytest.raises(ArtefactError, match=r"design.json .*grid"):
-        RunData.from_json(json.dumps({"grid": [[1, 2]], "grid_size": 1, "valid": True, "modules": 1,
-                                      "actuators": 1}), files["trajectories.json"])
+        RunData.from_json(
+            json.dumps({"grid": [[1, 2]], "grid_size": 1, "valid": True, "modules": 1, "actuators": 1}),
+            files["trajectories.json"],
+        )
 
 
 def test_recording_is_a_viser_file_of_the_slews():
@@ -114,8 +125,17 @@ def test_live_viewer_sessions(tmp_path):
     try:
         assert app.port > 0
         # The server-wide scene/gui API stands in for one client's (same methods).
-        fake = type("Client", (), {"scene": app.server.scene, "gui": app.server.gui, "client_id": 0,
-                                   "atomic": app.server.atomic, "camera": type("Cam", (), {})()})()
+        fake = type(
+            "Client",
+            (),
+            {
+                "scene": app.server.scene,
+                "gui": app.server.gui,
+                "client_id": 0,
+                "atomic": app.server.atomic,
+                "camera": type("Cam", (), {})(),
+            },
+        )()
         s = Session(app, fake, {"run": "1", "compare": "2", "controller": "pd_baseline", "t": "0.5"})
         assert [r.title for r in s.runs] == ["a", "b"] and len(s.sats) == 2
         assert s.ctrl_dd.value == "PD baseline" and s.ep_dd.options[0].startswith("1: 90 deg slew")
@@ -146,6 +166,7 @@ def test_live_viewer_refuses_tabs_of_other_sites(tmp_path):
         (d / k).write_bytes(v)
     app = ViewerApp(DirRuns([d]), port=0)
     try:
+
         def refused(**headers):
             conn = SimpleNamespace(request=SimpleNamespace(headers=headers, path="/?run=1"))
             app._connection = lambda client: conn  # viser's handshake request, as _connection reads it

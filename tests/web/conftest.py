@@ -23,9 +23,17 @@ from tests.worker.helpers import REPO, wait_for
 CHROMIUM = os.environ.get("MODSAT_CHROMIUM", "/usr/bin/chromium")
 MODSAT = str(Path(sys.executable).with_name("modsat"))
 # Flags that work on a closed network with software WebGL (shared/VIEWER-NOTES.md).
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                  "--enable-unsafe-swiftshader"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--enable-unsafe-swiftshader",
+]
 DESKTOP = {"width": 1280, "height": 800}
 PHONE = {"width": 390, "height": 844}
 
@@ -49,7 +57,7 @@ def actuator_pixels(png: bytes, box: tuple[float, float, float, float] | None = 
     img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.float64) / 255.0
     if box is not None:
         h, w = img.shape[:2]
-        img = img[int(box[1] * h):int(box[3] * h), int(box[0] * w):int(box[2] * w)]
+        img = img[int(box[1] * h) : int(box[3] * h), int(box[0] * w) : int(box[2] * w)]
     r, g, b = img[..., 0], img[..., 1], img[..., 2]
     mx, mn = img.max(axis=-1), img.min(axis=-1)
     sat = np.where(mx > 0, (mx - mn) / np.maximum(mx, 1e-9), 0.0)
@@ -65,8 +73,15 @@ class Serve(HttpProc):
     group = True
     stop_timeout_s = 30.0
 
-    def __init__(self, data_dir: Path, log_path: Path, *, workers: int = 1, viewer: bool = True,
-                 env: dict[str, str] | None = None):
+    def __init__(
+        self,
+        data_dir: Path,
+        log_path: Path,
+        *,
+        workers: int = 1,
+        viewer: bool = True,
+        env: dict[str, str] | None = None,
+    ):
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         self.data_dir = data_dir
@@ -74,10 +89,16 @@ class Serve(HttpProc):
         self._log = open(log_path, "wb")  # closed in stop()
         cmd = [MODSAT, "serve", "--workers", str(workers), "--data-dir", str(data_dir), "--port", str(self.port)]
         cmd += ["--viewer-port", "0"] if viewer else ["--no-viewer"]
-        env = {**os.environ, "MODSAT_POLL_S": "0.2", "MODSAT_SSE_POLL_S": "0.2", "MODSAT_HEARTBEAT_S": "2",
-               **(env or {})}
-        self.proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT,
-                                     start_new_session=True)
+        env = {
+            **os.environ,
+            "MODSAT_POLL_S": "0.2",
+            "MODSAT_SSE_POLL_S": "0.2",
+            "MODSAT_HEARTBEAT_S": "2",
+            **(env or {}),
+        }
+        self.proc = subprocess.Popen(
+            cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True
+        )
         wait_for(self._up, 60, f"modsat serve on port {self.port}")
         self.client = httpx.Client(base_url=self.base, timeout=30)
 

@@ -25,11 +25,23 @@ from .conftest import (
 )
 
 # A GA baseline small enough for CI (about 15 s on 2 cores), submitted over the API.
-TINY_GA = {"preset": "quick", "overrides": {
-    "name": "ga-ci", "algorithm": "ga", "ga": {"population_size": 2, "steps_per_design": 48},
-    "training": {"total_env_steps": 96, "learning_starts": 32, "eval_every_steps": 48, "eval_episodes": 2,
-                 "batch_size": 32, "hidden_sizes": [32, 32]},
-    "evaluation": {"episodes": 4, "trajectories": 2}}}
+TINY_GA = {
+    "preset": "quick",
+    "overrides": {
+        "name": "ga-ci",
+        "algorithm": "ga",
+        "ga": {"population_size": 2, "steps_per_design": 48},
+        "training": {
+            "total_env_steps": 96,
+            "learning_starts": 32,
+            "eval_every_steps": 48,
+            "eval_episodes": 2,
+            "batch_size": 32,
+            "hidden_sizes": [32, 32],
+        },
+        "evaluation": {"episodes": 4, "trajectories": 2},
+    },
+}
 
 #: Orange pixels that show an actuator. The RL run's design is the full cube with the one
 #: actuator at its centre, seen through the translucent structure (362 pixels measured at
@@ -202,8 +214,11 @@ def test_a_page_of_another_site_gets_no_view(service, new_page):
         page = new_page()
         ws = quote(f"ws://127.0.0.1:{vport}/?run={RUN['rl']}", safe="")
         page.goto(f"http://127.0.0.2:{other.server_port}/?websocket={ws}")
-        wait_for(lambda: "refused a websocket: a page of another site ('http://127.0.0.2" in service.log(), 60,
-                 "the viewer to refuse the foreign page")
+        wait_for(
+            lambda: "refused a websocket: a page of another site ('http://127.0.0.2" in service.log(),
+            60,
+            "the viewer to refuse the foreign page",
+        )
         time.sleep(2.0)
         assert page.get_by_text(f"job {RUN['rl']}").count() == 0, "no run reached the foreign page"
     finally:
@@ -214,8 +229,14 @@ def test_a_page_of_another_site_gets_no_view(service, new_page):
 def test_rl_and_ga_side_by_side(service, new_page):
     _need("rl", "ga")
     shots = screenshot_dir()
-    ga = wait_for(lambda: (j := service.client.get(f"/api/jobs/{RUN['ga']}").json())["status"] in (
-        "succeeded", "failed", "cancelled") and j, 180, "the GA job")
+    ga = wait_for(
+        lambda: (
+            (j := service.client.get(f"/api/jobs/{RUN['ga']}").json())["status"] in ("succeeded", "failed", "cancelled")
+            and j
+        ),
+        180,
+        "the GA job",
+    )
     assert ga["status"] == "succeeded", ga["error_detail"]
     page = new_page()
     page.goto(f"{service.base}/#job={RUN['rl']}")
@@ -229,8 +250,9 @@ def test_rl_and_ga_side_by_side(service, new_page):
     frame.get_by_text(re.compile(r"GA job \d+ ga-ci error [0-9.]+ deg")).first.wait_for()
     png = _scene_shot(frame, shots / "rl-vs-ga.png")
     left, right = actuator_pixels(png, (0.0, 0.0, 0.5, 1.0)), actuator_pixels(png, (0.5, 0.0, 1.0, 1.0))
-    assert left > MIN_ACTUATOR_PIXELS and right > MIN_ACTUATOR_PIXELS, \
+    assert left > MIN_ACTUATOR_PIXELS and right > MIN_ACTUATOR_PIXELS, (
         f"two satellites, one each side (orange pixels {left}, {right})"
+    )
     page.screenshot(path=str(shots / "rl-vs-ga-page.png"))
     assert f"compare={RUN['ga']}" in page.url
 

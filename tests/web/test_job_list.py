@@ -43,12 +43,28 @@ CROSS[0][1][1] = CROSS[2][1][1] = 2
 #: Evaluation summaries (evaluate.MonteCarloResult.summary): `success_rate` is at the mission's
 #: tolerance, 1 deg here (TOLERANCE), and the report tolerances 0.25 and 1 deg are scored too.
 TOLERANCE = 1.0
-PD_CUBE = {"episodes": 8, "success_rate": 1.0, "success_rate_at_0.25_deg": 0.875, "success_rate_at_1_deg": 1.0,
-           "mean_return": -41.5, "std_return": 3.0, "safety_violations": 0, "median_final_error_deg": 0.05,
-           "median_settling_time_s": 9.1, "median_slew_time_ratio": 1.4, "median_effort_Nms": 0.01,
-           "max_peak_rate_rad_s": 0.05, "median_final_rate_rad_s": 0.0001}
-POLICY_CUBE = {**PD_CUBE, "success_rate": 0.75, "success_rate_at_0.25_deg": 0.5, "success_rate_at_1_deg": 0.75,
-               "mean_return": -60.25}
+PD_CUBE = {
+    "episodes": 8,
+    "success_rate": 1.0,
+    "success_rate_at_0.25_deg": 0.875,
+    "success_rate_at_1_deg": 1.0,
+    "mean_return": -41.5,
+    "std_return": 3.0,
+    "safety_violations": 0,
+    "median_final_error_deg": 0.05,
+    "median_settling_time_s": 9.1,
+    "median_slew_time_ratio": 1.4,
+    "median_effort_Nms": 0.01,
+    "max_peak_rate_rad_s": 0.05,
+    "median_final_rate_rad_s": 0.0001,
+}
+POLICY_CUBE = {
+    **PD_CUBE,
+    "success_rate": 0.75,
+    "success_rate_at_0.25_deg": 0.5,
+    "success_rate_at_1_deg": 0.75,
+    "mean_return": -60.25,
+}
 
 
 def _design(grid) -> DesignReport:
@@ -59,9 +75,20 @@ def _design(grid) -> DesignReport:
 
 def _curve(n: int = 5) -> list[CurvePoint]:
     """Learning-curve points as reports.curve_point makes them, less the report tolerances' success."""
-    return [CurvePoint(env_steps=TOTAL * (i + 1) // n, updates=10 * i, valid=True, modules=27, actuators=1,
-                       mean_return=-120.0 + 15.0 * i, success_rate=0.1 * i, median_final_error_deg=2.0 / (i + 1),
-                       median_slew_time_ratio=2.0) for i in range(n)]
+    return [
+        CurvePoint(
+            env_steps=TOTAL * (i + 1) // n,
+            updates=10 * i,
+            valid=True,
+            modules=27,
+            actuators=1,
+            mean_return=-120.0 + 15.0 * i,
+            success_rate=0.1 * i,
+            median_final_error_deg=2.0 / (i + 1),
+            median_slew_time_ratio=2.0,
+        )
+        for i in range(n)
+    ]
 
 
 class Jobs:
@@ -72,9 +99,18 @@ class Jobs:
         self.store = JobStore(default_db_url(serve.data_dir))
 
     def submit(self, name: str, **overrides) -> int:
-        r = self.serve.client.post("/api/jobs", json={"preset": "quick", "overrides": {
-            "name": name, "training": {"total_env_steps": TOTAL}, "mission": {"tolerance_deg": TOLERANCE},
-            **overrides}})
+        r = self.serve.client.post(
+            "/api/jobs",
+            json={
+                "preset": "quick",
+                "overrides": {
+                    "name": name,
+                    "training": {"total_env_steps": TOTAL},
+                    "mission": {"tolerance_deg": TOLERANCE},
+                    **overrides,
+                },
+            },
+        )
         assert r.status_code == 201, r.text
         return r.json()["id"]
 
@@ -92,19 +128,36 @@ class Jobs:
     def complete(self, c, grid, *, pd=PD_CUBE, policy=POLICY_CUBE, elapsed_s: float = 62.0) -> None:
         curve = _curve()
         for p in curve:
-            assert self.store.publish_progress(c, ProgressRecord(
-                env_steps=p.env_steps, total_env_steps=TOTAL, phase="training", eval=p, elapsed_s=elapsed_s / 2,
-            ).to_dict())
+            assert self.store.publish_progress(
+                c,
+                ProgressRecord(
+                    env_steps=p.env_steps,
+                    total_env_steps=TOTAL,
+                    phase="training",
+                    eval=p,
+                    elapsed_s=elapsed_s / 2,
+                ).to_dict(),
+            )
         self.store.publish_progress(c, ProgressRecord(env_steps=TOTAL, phase="done", elapsed_s=elapsed_s).to_dict())
         design = _design(grid)
-        evaluation = EvaluationReport.model_validate({
-            "episodes": 8, "seed": 0, "design_valid": True, "policy": {"summary": policy, "episodes": []},
-            "pd_baseline": {"summary": pd, "episodes": []}})
-        files = {"design.json": design.to_json(), "evaluation.json": evaluation.to_json(),
-                 "curve.json": CurveFile(algorithm="td3-codesign", points=curve).to_json()}
+        evaluation = EvaluationReport.model_validate(
+            {
+                "episodes": 8,
+                "seed": 0,
+                "design_valid": True,
+                "policy": {"summary": policy, "episodes": []},
+                "pd_baseline": {"summary": pd, "episodes": []},
+            }
+        )
+        files = {
+            "design.json": design.to_json(),
+            "evaluation.json": evaluation.to_json(),
+            "curve.json": CurveFile(algorithm="td3-codesign", points=curve).to_json(),
+        }
         summary = RunSummary.model_validate({"policy": policy, "pd_baseline": pd, "design": design.figures()})
-        assert self.store.complete(c, files=files, summary=summary.to_dict(), env_steps=TOTAL,
-                                   attempt_seconds=elapsed_s)
+        assert self.store.complete(
+            c, files=files, summary=summary.to_dict(), env_steps=TOTAL, attempt_seconds=elapsed_s
+        )
 
 
 @pytest.fixture(scope="module")
@@ -112,26 +165,39 @@ def jobs(tmp_path_factory):
     d = tmp_path_factory.mktemp("joblist")
     s = Serve(d / "data", d / "serve.log", workers=0, viewer=False)
     j = Jobs(s)
-    ids = {"cube": j.finish("full-cube", CUBE), "cross": j.finish("cross", CROSS),
-           "long": j.finish(LONG_NAME, CUBE), "cjk": j.finish(CJK_NAME, CROSS)}
+    ids = {
+        "cube": j.finish("full-cube", CUBE),
+        "cross": j.finish("cross", CROSS),
+        "long": j.finish(LONG_NAME, CUBE),
+        "cjk": j.finish(CJK_NAME, CROSS),
+    }
 
     # A job that lost its first attempt's lease after 3 min 28 s, and succeeded on the second in
     # 62 s (the worker's elapsed_s counts only the second): 4 min 30 s in all.
     jid = j.submit("two-attempts")
     c = j.claim(jid)
     j.store.publish_progress(c, {"env_steps": 1000, "total_env_steps": TOTAL, "phase": "training", "elapsed_s": 200})
-    assert j.store.fail_attempt(c, error="lease expired", detail=None, outcome="lease-expired", retry_delay_s=0,
-                                attempt_seconds=0.0) == "queued"
+    assert (
+        j.store.fail_attempt(
+            c, error="lease expired", detail=None, outcome="lease-expired", retry_delay_s=0, attempt_seconds=0.0
+        )
+        == "queued"
+    )
     c = j.claim(jid)
     j.complete(c, CUBE, elapsed_s=62.0)
     con = sqlite3.connect(s.data_dir / "modsat.db")
     with con:
-        t0 = con.execute("select started_at from modsat_attempts where job_id = ? and attempt = 1",
-                         (jid,)).fetchone()[0]
-        con.execute("update modsat_attempts set started_at = ?, ended_at = ? where job_id = ? and attempt = 1",
-                    (t0, t0 + 208.0, jid))
-        con.execute("update modsat_attempts set started_at = ?, ended_at = ? where job_id = ? and attempt = 2",
-                    (t0 + 215.0, t0 + 277.0, jid))
+        t0 = con.execute("select started_at from modsat_attempts where job_id = ? and attempt = 1", (jid,)).fetchone()[
+            0
+        ]
+        con.execute(
+            "update modsat_attempts set started_at = ?, ended_at = ? where job_id = ? and attempt = 1",
+            (t0, t0 + 208.0, jid),
+        )
+        con.execute(
+            "update modsat_attempts set started_at = ?, ended_at = ? where job_id = ? and attempt = 2",
+            (t0 + 215.0, t0 + 277.0, jid),
+        )
     con.close()
     ids["retried"] = jid
     ids["running"] = j.submit("still-running")
@@ -173,8 +239,9 @@ def test_no_clipped_column_at_1280_with_long_and_cjk_names(jobs, new_page):
     assert heads.all_text_contents() == ["#", "name", "status", "progress", "eval return"]
     for i in range(heads.count()):
         h = heads.nth(i).bounding_box()
-        assert h["x"] >= box["x"] - 0.5 and h["x"] + h["width"] <= box["x"] + box["width"] + 0.5, \
+        assert h["x"] >= box["x"] - 0.5 and h["x"] + h["width"] <= box["x"] + box["width"] + 0.5, (
             f"header {heads.nth(i).text_content()!r} is outside the table's box"
+        )
         assert h["x"] + h["width"] <= DESKTOP["width"]
     for key in ("long", "cjk"):
         row = page.locator(f"#job-{ids[key]}")
@@ -201,7 +268,8 @@ def test_cjk_names_are_drawn_not_boxes(jobs, new_page):
     _open(page, serve.base)
     font = page.locator(f"#job-{ids['cjk']} .job-name").evaluate("e => getComputedStyle(e).font")
     chars = ["模", "卫", "の", "設", "실"]
-    shapes = page.evaluate("""([font, chars]) => {
+    shapes = page.evaluate(
+        """([font, chars]) => {
         const c = document.createElement('canvas'); c.width = 40; c.height = 40;
         const g = c.getContext('2d', { willReadFrequently: true });
         return chars.map((ch) => {
@@ -211,7 +279,9 @@ def test_cjk_names_are_drawn_not_boxes(jobs, new_page):
             for (let i = 3; i < d.length; i += 4) s += d[i] > 127 ? '1' : '0';
             return s;
         });
-    }""", [font, [*chars, "\U0010fffd"]])
+    }""",
+        [font, [*chars, "\U0010fffd"]],
+    )
     tofu, drawn = shapes[-1], shapes[:-1]
     assert all("1" in s for s in drawn), "something is drawn"
     assert all(s != tofu for s in drawn), "a CJK character is drawn as the missing-glyph box (install fonts-noto-cjk)"
@@ -229,10 +299,13 @@ def test_phone_shows_the_job_before_the_form(jobs, new_page):
     # the tap scrolls the job to the top once its details are in: wait for that, then measure
     # everything at once in page coordinates (measuring box by box raced the scroll)
     page.wait_for_function("Math.abs(document.querySelector('#detail').getBoundingClientRect().top) < 2")
-    jobs_box, detail, form = page.evaluate("""(sels) => sels.map((s) => {
+    jobs_box, detail, form = page.evaluate(
+        """(sels) => sels.map((s) => {
         const r = document.querySelector(s).getBoundingClientRect();
         return { x: r.x, y: r.y + window.scrollY, width: r.width, height: r.height };
-    })""", ["#jobs", "#detail", "#submit"])
+    })""",
+        ["#jobs", "#detail", "#submit"],
+    )
     assert jobs_box["y"] + jobs_box["height"] <= detail["y"], "the list, then the job"
     assert detail["y"] + detail["height"] <= form["y"], "the job's details come before the submit form"
     assert detail["width"] <= PHONE["width"] and form["width"] <= PHONE["width"]
@@ -262,8 +335,10 @@ def test_pd_baseline_on_the_learning_curves(jobs, new_page):
     assert float(line.get_attribute("data-value")) == PD_CUBE["mean_return"]
     # The line is drawn where -41.5 is on the chart's y axis (read from two of its tick labels),
     # and the axis reaches up to it.
-    ticks = sorted((float(t.text_content()), float(t.get_attribute("y")) - 4)
-                   for t in ret.locator("text.tick[text-anchor=end]").all())
+    ticks = sorted(
+        (float(t.text_content()), float(t.get_attribute("y")) - 4)
+        for t in ret.locator("text.tick[text-anchor=end]").all()
+    )
     (v0, y0), (v1, y1) = ticks[0], ticks[-1]
     y = float(line.get_attribute("y1"))
     expect = y0 + (y1 - y0) * (PD_CUBE["mean_return"] - v0) / (v1 - v0)

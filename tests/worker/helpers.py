@@ -45,8 +45,14 @@ def wait_for(pred: Callable[[], Any], timeout: float, what: str, interval: float
         time.sleep(interval)
 
 
-def spec_json(total_env_steps: int = 400, *, checkpoint_every: int = 100, num_envs: int = 16, seed: int = 0,
-              name: str | None = None) -> str:
+def spec_json(
+    total_env_steps: int = 400,
+    *,
+    checkpoint_every: int = 100,
+    num_envs: int = 16,
+    seed: int = 0,
+    name: str | None = None,
+) -> str:
     """A tiny valid JobSpec (the quick preset with a small budget)."""
     from modsat_core.presets import get_preset
     from modsat_core.spec import parse_spec
@@ -54,15 +60,20 @@ def spec_json(total_env_steps: int = 400, *, checkpoint_every: int = 100, num_en
     d = get_preset("quick").model_dump(mode="json")
     d["seed"] = seed
     d["name"] = name or "test"
-    d["training"].update(total_env_steps=total_env_steps, checkpoint_every_steps=checkpoint_every,
-                         eval_every_steps=max(1, total_env_steps // 2), num_envs=num_envs)
+    d["training"].update(
+        total_env_steps=total_env_steps,
+        checkpoint_every_steps=checkpoint_every,
+        eval_every_steps=max(1, total_env_steps // 2),
+        num_envs=num_envs,
+    )
     return parse_spec(d).model_dump_json()
 
 
 def submit(store, total_env_steps: int = 400, *, max_attempts: int = 3, **kw) -> int:
     text = spec_json(total_env_steps, **kw)
-    return store.submit(text, name="test", algorithm="td3-codesign", total_env_steps=total_env_steps,
-                        max_attempts=max_attempts)
+    return store.submit(
+        text, name="test", algorithm="td3-codesign", total_env_steps=total_env_steps, max_attempts=max_attempts
+    )
 
 
 class WorkerProc:
@@ -74,7 +85,11 @@ class WorkerProc:
         full_env = {**os.environ, **FAST_ENV, **(env or {})}
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "worker", "--db", db_url, "--runner", runner],
-            cwd=REPO, env=full_env, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True,
+            cwd=REPO,
+            env=full_env,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
         )
         self.pid = self.proc.pid
 
@@ -158,8 +173,9 @@ class PgServer:
     def _admin(self):
         import psycopg
 
-        return psycopg.connect(self.admin_url.replace("postgresql+psycopg", "postgresql"), autocommit=True,
-                               connect_timeout=3)
+        return psycopg.connect(
+            self.admin_url.replace("postgresql+psycopg", "postgresql"), autocommit=True, connect_timeout=3
+        )
 
     def start(self) -> None:
         try:

@@ -18,8 +18,9 @@ def crash_once(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None
         if checkpoint is None and d["env_steps"] >= half:
             os.kill(os.getpid(), signal.SIGKILL)
 
-    return simulated(spec, on_progress=progress, on_checkpoint=on_checkpoint, should_stop=should_stop,
-                     checkpoint=checkpoint)
+    return simulated(
+        spec, on_progress=progress, on_checkpoint=on_checkpoint, should_stop=should_stop, checkpoint=checkpoint
+    )
 
 
 def long_file_name(spec, *, on_progress, on_checkpoint, should_stop, checkpoint=None):

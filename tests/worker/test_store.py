@@ -103,8 +103,14 @@ def test_reaper_fails_job_after_retry_limit(store):
 def test_failed_attempt_retries_with_backoff(store):
     job_id = submit(store, max_attempts=3)
     c = store.claim("w", lease_s=30)
-    status = store.fail_attempt(c, error="training raised ValueError: boom", detail="Traceback...",
-                                outcome="failed", retry_delay_s=0.6, attempt_seconds=0.1)
+    status = store.fail_attempt(
+        c,
+        error="training raised ValueError: boom",
+        detail="Traceback...",
+        outcome="failed",
+        retry_delay_s=0.6,
+        attempt_seconds=0.1,
+    )
     assert status == "queued"
     job = store.get_job(job_id)
     assert "ValueError: boom" in job["error"] and "retrying" in job["error"]
@@ -178,8 +184,9 @@ def test_large_artifact_round_trip_in_chunks(store):
     job_id = submit(store)
     c = store.claim("w", lease_s=30)
     blob = bytes(range(256)) * (3 * 4096 + 17)  # ~3 MiB, not a multiple of the chunk
-    assert store.complete(c, files={"policy.pt": blob, "curve.json": b"[]"}, summary={"a": 1}, env_steps=400,
-                          attempt_seconds=1)
+    assert store.complete(
+        c, files={"policy.pt": blob, "curve.json": b"[]"}, summary={"a": 1}, env_steps=400, attempt_seconds=1
+    )
     info = store.artifact_info(job_id, "policy.pt")
     assert info["size"] == len(blob)
     assert b"".join(store.iter_artifact(job_id, "policy.pt", info["size"], info["sha256"])) == blob
@@ -257,8 +264,14 @@ def test_failure_text_with_nul_characters_is_stored(store):
     """A training's error message may contain NUL, which PostgreSQL text refuses."""
     job_id = submit(store, max_attempts=1)
     c = store.claim("w", lease_s=30)
-    status = store.fail_attempt(c, error="training raised ValueError: a\x00b", detail="Traceback\x00...",
-                                outcome="failed", retry_delay_s=0, attempt_seconds=0.1)
+    status = store.fail_attempt(
+        c,
+        error="training raised ValueError: a\x00b",
+        detail="Traceback\x00...",
+        outcome="failed",
+        retry_delay_s=0,
+        attempt_seconds=0.1,
+    )
     assert status == "failed"
     job = store.get_job(job_id)
     assert "ValueError: a\\x00b" in job["error"] and job["error_detail"] == "Traceback\\x00..."

@@ -163,12 +163,20 @@ def test_kill9_during_real_training_resumes_from_its_checkpoint(sqlite_url, spaw
     store = JobStore(sqlite_url)
     store.create_schema()
     d = get_preset("quick").model_dump(mode="json")
-    d["training"].update(total_env_steps=640, learning_starts=160, eval_every_steps=320,
-                         checkpoint_every_steps=160, train_frequency=16, batch_size=32, hidden_sizes=[16, 16])
+    d["training"].update(
+        total_env_steps=640,
+        learning_starts=160,
+        eval_every_steps=320,
+        checkpoint_every_steps=160,
+        train_frequency=16,
+        batch_size=32,
+        hidden_sizes=[16, 16],
+    )
     d["evaluation"].update(episodes=2, trajectories=0)
     spec = parse_spec(d)
-    job_id = store.submit(spec.model_dump_json(), name="real", algorithm=spec.algorithm, total_env_steps=640,
-                          max_attempts=3)
+    job_id = store.submit(
+        spec.model_dump_json(), name="real", algorithm=spec.algorithm, total_env_steps=640, max_attempts=3
+    )
     a = spawn_worker(sqlite_url, "train")
     wait_for(lambda: (store.get_job(job_id)["checkpoint_env_steps"] or 0) >= 160, 120, "a real checkpoint")
     a.signal(signal.SIGKILL)
@@ -179,7 +187,9 @@ def test_kill9_during_real_training_resumes_from_its_checkpoint(sqlite_url, spaw
     wait_for(lambda: _status(store, job_id) == "succeeded", 180, "the resumed training to succeed")
     attempts = store.list_attempts(job_id)
     assert [(x["outcome"], x["resumed_from_env_steps"]) for x in attempts] == [
-        ("lease-expired", None), ("succeeded", checkpoint)]
+        ("lease-expired", None),
+        ("succeeded", checkpoint),
+    ]
     second = [r["env_steps"] for r in store.metrics_after(job_id) if r["attempt"] == 2]
     assert second and min(second) > checkpoint
     curve = json.loads(store.read_artifact(job_id, "curve.json"))
