@@ -1,16 +1,17 @@
-"""Co-design learns on a cut-down `quick`: a measured outcome, not a loss.
+"""Co-design lands the slew: the `quick` preset as shipped, success itself asserted.
 
-The `quick` preset (set network, the CPU recipe), seed 0, with its budget cut to 10k env
-steps so that CI can afford it; its exploration schedules scale with the budget. The
-trained policy is compared, on the final evaluation's 32 seeded slews, with what it started
-from: the same network untrained flying its own design, and 8 random valid designs flown by
-that untrained controller (`modsat_core.baselines.untrained_baselines`). The figures of the
-run are in docs/learning.md ("Status"); the margin asserted, 100 above the best baseline, is
-far outside the spread of the baselines' returns (all within a few of -169, every slew
-breaking the rate limit), so it cannot be reached by a lucky draw of designs.
+`modsat train --preset quick` (seed 0, 60k env steps: the set network, the CPU recipe, one
+update per two env steps, the design held for the first 20k steps) is trained here exactly
+as a user gets it, and its final evaluation (32 seeded slews, 1 deg and 0.01 rad/s at the
+end of 120 steps) must land at least `MIN_SUCCESS` of them. What it is measured against,
+on the same slews: the same network untrained, flying its own design, and 8 random valid
+designs flown by that untrained controller (`modsat_core.baselines.untrained_baselines`),
+which land none (every slew breaks the rate limit); and the PD baseline on the designed
+satellite. docs/learning.md, "Eighth round": this run is e35 (100 % of the final 32, 97 %
+of 100 slews); seeds 1 and 2 of the same preset are e37 and e38 there.
 
-Success is asserted by tests/learning/test_control_lands.py (the recipe's controller on the
-same mission); no co-design run of 10k steps lands slews yet.
+It is the slowest test (about 25 min on one core of the 2-core CI machine, the other core
+running the rest of the suite); it is the product's central promise, so CI pays for it.
 """
 
 from __future__ import annotations
@@ -19,30 +20,30 @@ import pytest
 
 from modsat_core.baselines import untrained_baselines
 from modsat_core.presets import get_preset
-from modsat_core.spec import parse_spec
 from modsat_core.train import train
 
-pytestmark = pytest.mark.slow  # trains co-design for 10k env steps (minutes)
+pytestmark = pytest.mark.slow  # trains co-design for 60k env steps (tens of minutes)
 
-MARGIN = 100.0
-STEPS = 10_000
+#: Share of the final 32 slews that must land. The baselines land none; 24 of 32 by chance
+#: would need a controller that points and holds still, which only training gives.
+MIN_SUCCESS = 0.75
 
 
-def test_codesign_on_quick_beats_the_untrained_policy_and_random_designs():
-    d = get_preset("quick").model_dump(mode="json")
-    d["training"].update(total_env_steps=STEPS)
-    spec = parse_spec(d)
+def test_quick_codesign_lands_most_slews():
+    spec = get_preset("quick")
+    assert spec.seed == 0
     res = train(spec)
     trained = res.summary["policy"]
     base = untrained_baselines(spec, designs=8)
-    own = base["untrained_policy"]["mean_return"]
-    rand = base["random_designs"]
+    own, rand = base["untrained_policy"], base["random_designs"]
     print(
-        f"trained {trained['mean_return']:.1f} (violations {trained['safety_violations']}, median error "
-        f"{trained['median_final_error_deg']:.1f} deg, success {trained['success_rate']:.2f}); untrained own design "
-        f"{own:.1f}; random designs mean {rand['mean_return']:.1f}, best {rand['best_mean_return']:.1f}"
+        f"trained: success {trained['success_rate']:.2f}, return {trained['mean_return']:.1f}, violations "
+        f"{trained['safety_violations']}, median error {trained['median_final_error_deg']:.2f} deg; untrained own "
+        f"design: success {own['success_rate']:.2f}, return {own['mean_return']:.1f}; random designs: best success "
+        f"{rand['best_success_rate']:.2f}, best return {rand['best_mean_return']:.1f}; PD on the design: "
+        f"{res.summary['pd_baseline']['success_rate']:.2f}"
     )
     assert res.summary["design"]["valid"]
-    assert trained["mean_return"] >= max(own, rand["best_mean_return"]) + MARGIN
-    # Every random design breaks the rate limit on every slew under the untrained controller.
-    assert trained["safety_violations"] < min(r["safety_violations"] for r in rand["designs"])
+    assert trained["success_rate"] >= MIN_SUCCESS
+    assert own["success_rate"] == 0.0 and rand["best_success_rate"] == 0.0
+    assert res.summary["pd_baseline"]["success_rate"] == 1.0
