@@ -1,17 +1,19 @@
-"""Co-design lands the slew: the `quick` preset as shipped, success itself asserted.
+"""Co-design lands the slew: a CI variant of `quick`, success itself asserted.
 
-`modsat train --preset quick` (seed 0, 60k env steps: the set network, the CPU recipe, one
-update per two env steps, the design held for the first 20k steps) is trained here exactly
-as a user gets it, and its final evaluation (32 seeded slews, 1 deg and 0.01 rad/s at the
-end of 120 steps) must land at least `MIN_SUCCESS` of them. What it is measured against,
-on the same slews: the same network untrained, flying its own design, and 8 random valid
-designs flown by that untrained controller (`modsat_core.baselines.untrained_baselines`),
-which land none (every slew breaks the rate limit); and the PD baseline on the designed
-satellite. docs/learning.md, "Eighth round": this run is e35 (100 % of the final 32, 97 %
-of 100 slews); seeds 1 and 2 of the same preset are e37 and e38 there.
+`quick` as shipped (the set network, the CPU recipe, the design held for the first 20k of
+60k env steps) lands seeds 0, 1 and 2 (88-100 % of 100 slews, docs/learning.md) but takes
+about an hour on one core: more than CI can give. This variant makes one update per two env
+steps (29k updates instead of 58k), everything else as shipped, seed 0: run e35 of
+docs/learning.md, "Eighth round" (100 % of the final 32 slews, 97 % of 100; 37 min on the
+busy 2-core machine). It is a regression check of that measured run, not a claim about
+every seed: seed 1 of this variant does not land (e37), which is why the preset keeps one
+update per step.
 
-It is the slowest test (about 25 min on one core of the 2-core CI machine, the other core
-running the rest of the suite); it is the product's central promise, so CI pays for it.
+Its final evaluation (32 seeded slews, 1 deg and 0.01 rad/s at the end of 120 steps) must
+land at least `MIN_SUCCESS` of them. Measured against on the same slews: the same network
+untrained, flying its own design, and 8 random valid designs flown by that untrained
+controller (`modsat_core.baselines.untrained_baselines`), which land none (every slew
+breaks the rate limit); and the PD baseline on the designed satellite, which lands all.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import pytest
 
 from modsat_core.baselines import untrained_baselines
 from modsat_core.presets import get_preset
+from modsat_core.spec import parse_spec
 from modsat_core.train import train
 
 pytestmark = pytest.mark.slow  # trains co-design for 60k env steps (tens of minutes)
@@ -29,9 +32,11 @@ pytestmark = pytest.mark.slow  # trains co-design for 60k env steps (tens of min
 MIN_SUCCESS = 0.75
 
 
-def test_quick_codesign_lands_most_slews():
-    spec = get_preset("quick")
-    assert spec.seed == 0
+def test_codesign_on_a_ci_variant_of_quick_lands_most_slews():
+    d = get_preset("quick").model_dump(mode="json")
+    assert d["seed"] == 0
+    d["training"].update(train_frequency=2)
+    spec = parse_spec(d)
     res = train(spec)
     trained = res.summary["policy"]
     base = untrained_baselines(spec, designs=8)

@@ -27,7 +27,7 @@ def test_flat_controller_with_the_cpu_recipe_settles_most_slews():
     d = get_preset("quick").model_dump(mode="json")
     d.update(algorithm="td3-control", seed=0)
     d["design"]["fixed_design"] = reference_design(3).tolist()
-    # One update per env step, as in the measured run (e24); `quick` itself now makes one per two.
+    # One update per env step, as in the measured run (e24).
     d["training"].update(total_env_steps=40_000, train_frequency=1)
     spec = parse_spec(d)
     report = bench_control(spec, eval_every=5_000)
