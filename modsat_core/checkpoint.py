@@ -49,19 +49,25 @@ def checkpoint_to_bytes(ckpt: dict) -> bytes:
     return buf.getvalue()
 
 
+def load_plain(data: bytes, what: str, allow: list | tuple = ()) -> object:
+    """``torch.load(weights_only=True)`` of a file a user can download or hand back: tensors and
+    plain data (and the ``allow``-ed globals) only; anything else is a ValueError naming ``what``."""
+    try:
+        with torch.serialization.safe_globals(list(allow)):
+            return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise ValueError(
+            f"not a modsat {what}: it holds objects other than tensors and plain data, which are "
+            f"not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}"
+        ) from None
+
+
 def checkpoint_from_bytes(data: bytes) -> dict:
     """Read a checkpoint with ``torch.load(weights_only=True)``: a checkpoint can be downloaded
     (``/api/jobs/{id}/artifacts/checkpoint.pt``) and handed back (``modsat train --resume``), so
     a pickle that would build other objects (and could run code) is refused. Numpy integer
     arrays, which checkpoints before this rule held (the best design's grid), are allowed."""
-    try:
-        with torch.serialization.safe_globals(_NUMPY_ARRAYS):
-            ckpt = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as exc:
-        raise ValueError(
-            "not a modsat checkpoint: it holds objects other than tensors and plain data, which are "
-            f"not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}"
-        ) from None
+    ckpt = load_plain(data, "checkpoint", allow=_NUMPY_ARRAYS)
     if not isinstance(ckpt, dict):
         raise ValueError("not a modsat checkpoint")
     return ckpt

@@ -6,11 +6,11 @@ Read with ``torch.load(weights_only=True)``: tensors and plain data only.
 from __future__ import annotations
 
 import io
-import pickle
 
 import numpy as np
 import torch
 
+from .checkpoint import load_plain
 from .features import N_FEATURES
 from .networks import make_actor
 from .spec import JobSpec
@@ -56,13 +56,7 @@ def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpe
     A policy file is downloaded and shared, so it is read with ``weights_only=True``: tensors
     and plain data only; a pickle that would build other objects (and could run code) is
     refused."""
-    try:
-        d = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as exc:
-        raise ValueError(
-            "not a modsat policy file: it holds objects other than tensors and plain data, which "
-            f"are not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}"
-        ) from None
+    d = load_plain(data, "policy file")
     if not isinstance(d, dict) or d.get("format") != "modsat-policy":
         raise ValueError("not a modsat policy file")
     if d.get("version") != POLICY_VERSION or d.get("n_features") != N_FEATURES:
