@@ -84,18 +84,26 @@ _NUMPY_ARRAYS: list = [
 ]
 
 
-def _plain(x):
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, np.generic):
-        return x.item()
+def _map_leaves(x, leaf):
+    """``x`` with ``leaf`` applied to everything that is not a dict, list or tuple."""
     if isinstance(x, dict):
-        return {k: _plain(v) for k, v in x.items()}
+        return {k: _map_leaves(v, leaf) for k, v in x.items()}
     if isinstance(x, list):
-        return [_plain(v) for v in x]
+        return [_map_leaves(v, leaf) for v in x]
     if isinstance(x, tuple):
-        return tuple(_plain(v) for v in x)
-    return x
+        return tuple(_map_leaves(v, leaf) for v in x)
+    return leaf(x)
+
+
+def _plain(x):
+    """Numpy arrays and scalars as lists and numbers (what weights_only loading reads)."""
+
+    def leaf(v):
+        if isinstance(v, np.ndarray):
+            return v.tolist()
+        return v.item() if isinstance(v, np.generic) else v
+
+    return _map_leaves(x, leaf)
 
 
 def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
@@ -145,20 +153,8 @@ class RunResult:
 
 
 def to_cpu(x):
-    if isinstance(x, torch.Tensor):
-        return x.detach().cpu()
-    if isinstance(x, dict):
-        return {k: to_cpu(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [to_cpu(v) for v in x]
-    return x
+    return _map_leaves(x, lambda v: v.detach().cpu() if isinstance(v, torch.Tensor) else v)
 
 
 def to_device(x, device):
-    if isinstance(x, torch.Tensor):
-        return x.to(device)
-    if isinstance(x, dict):
-        return {k: to_device(v, device) for k, v in x.items()}
-    if isinstance(x, list):
-        return [to_device(v, device) for v in x]
-    return x
+    return _map_leaves(x, lambda v: v.to(device) if isinstance(v, torch.Tensor) else v)
