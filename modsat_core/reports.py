@@ -180,9 +180,13 @@ def run_files(
     }
     if ev.design_valid:
         files["policy_export.pt"] = export_torchscript(actor, grid, spec)
-    summary = RunSummary(
+    return files, run_summary(ev, design).to_dict()
+
+
+def run_summary(ev: EvaluationReport, design: DesignReport) -> RunSummary:
+    """The short summary of a final evaluation (a job's ``evaluation``; what `modsat eval` prints)."""
+    return RunSummary(
         policy=ev.policy.summary,
         pd_baseline=ev.pd_baseline.summary if ev.pd_baseline else None,
         design=design.figures(),
     )
-    return files, summary.to_dict()

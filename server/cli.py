@@ -385,15 +385,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
             ev["pd_baseline"].pop("episodes", None)
         print(json.dumps(ev, indent=2))
     else:
-        from modsat_core.reports import design_report
+        from modsat_core.artefacts import EvaluationReport
+        from modsat_core.reports import design_report, run_summary
 
-        d = design_report(grid, spec).figures()
-        summary = {
-            "design": d.to_dict(),
-            "policy": ev["policy"]["summary"],
-            "pd_baseline": ev["pd_baseline"]["summary"] if ev["pd_baseline"] else None,
-        }
-        _print_evaluation(summary, sys.stdout)
+        summary = run_summary(EvaluationReport.model_validate(ev), design_report(grid, spec))
+        _print_evaluation(summary.to_dict(), sys.stdout)
     return 0
 
 

@@ -18,7 +18,6 @@ Times are epoch seconds from the database's clock (``db_now``).
 from __future__ import annotations
 
 import hashlib
-import json
 import mimetypes
 import time
 from collections.abc import Iterator, Mapping
@@ -524,7 +523,7 @@ class JobStore:
 
         ``data`` is a progress record (modsat_core.artefacts.ProgressRecord); one that does not
         fit raises :class:`~modsat_core.artefacts.ArtefactError`."""
-        rec = ProgressRecord.parse(json.loads(to_json(data)))  # numpy numbers, NaN and inf made JSON first
+        rec = ProgressRecord.parse(to_json(data))  # numpy numbers, NaN and inf made JSON first
         env_steps = rec.env_steps
         values: dict[str, Any] = {"last_seq": jobs.c.last_seq + 1, "env_steps": env_steps, "updated_at": db_now()}
         if rec.total_env_steps:
