@@ -24,6 +24,11 @@ class MLPActor(nn.Module):
     def finish(obs: Tensor, action: Tensor) -> Tensor:
         return action.clamp(-1.0, 1.0)
 
+    @staticmethod
+    def effort(obs: Tensor, action: Tensor) -> Tensor:
+        """(B,) sum of the squared actions of each row (`training.action_l2`)."""
+        return action.square().sum(-1)
+
 
 class MLPCritic(nn.Module):
     def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):

@@ -57,6 +57,12 @@ def finish(obs: CellObs, action: Tensor) -> Tensor:
     return action.clamp(-1.0, 1.0) * obs.act_mask.unsqueeze(-1)
 
 
+def effort(obs: CellObs, action: Tensor) -> Tensor:
+    """(B,) sum of the squared torque commands of a flying row's acting cells; 0 on design rows
+    (their outputs are type choices, not torques). The actor's penalty of `training.action_l2`."""
+    return action.square().sum((1, 2)) * (~obs.design).to(action.dtype)
+
+
 def masked_mean(t: Tensor, mask: Tensor) -> Tensor:
     """Mean of (B, C, k) over the cells where ``mask`` (B, C) is true (zeros where none is)."""
     w = mask.to(t.dtype)
@@ -87,6 +93,7 @@ class CellActor(nn.Module):
         return self.act(obs.x, obs.act_mask, obs.value_mask, obs.design)
 
     finish = staticmethod(finish)
+    effort = staticmethod(effort)
 
 
 class CellCritic(nn.Module):
@@ -191,6 +198,7 @@ class SetActor(nn.Module):
         return self.act(obs.x, obs.act_mask, obs.value_mask, obs.design)
 
     finish = staticmethod(finish)
+    effort = staticmethod(effort)
 
 
 class _SetCriticPhase(nn.Module):

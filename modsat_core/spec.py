@@ -71,6 +71,15 @@ class Training(_Section):
             "starts) to this value (at the end of the budget). null = constant noise (the paper)."
         ),
     )
+    exploration_noise_decay_steps: int | None = Field(
+        None,
+        ge=1,
+        le=1_000_000_000,
+        description=(
+            "Env steps (counted from `learning_starts`) over which the exploration noise falls to "
+            "`exploration_noise_final`, then stays there. null = over the whole budget."
+        ),
+    )
     design_exploration: float = Field(
         0.1, ge=0.0, le=1.0, description="Probability that a cell's design action is replaced by a random type."
     )
@@ -116,6 +125,17 @@ class Training(_Section):
     )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
     noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
+    action_l2: float = Field(
+        0.0,
+        ge=0.0,
+        le=1000.0,
+        description=(
+            "Weight of the flight actions' squared torque commands (in [-1, 1], summed over the "
+            "actuators) added to the actor's loss, as HER's `action_l2` (Andrychowicz et al. 2017): it "
+            "keeps the policy out of tanh saturation so that it learns the small torques of a hold. "
+            "0 = off (the paper)."
+        ),
+    )
     policy_delay: int = Field(2, ge=1, le=100, description="Critic updates per actor/target update.")
     train_frequency: int = Field(2, ge=1, le=1000, description="Env steps between gradient updates.")
     learning_starts: int = Field(10_000, ge=0, le=10_000_000)
@@ -124,10 +144,10 @@ class Training(_Section):
     checkpoint_every_steps: int = Field(50_000, ge=1, le=1_000_000_000)
     device: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` uses a GPU where torch sees one.")
 
-    def _schedule(self, start: float, final: float | None, env_steps: int) -> float:
+    def _schedule(self, start: float, final: float | None, env_steps: int, span: int | None = None) -> float:
         if final is None:
             return start
-        span = max(self.total_env_steps - self.learning_starts, 1)
+        span = max(self.total_env_steps - self.learning_starts, 1) if span is None else span
         frac = min(max((env_steps - self.learning_starts) / span, 0.0), 1.0)
         return start + frac * (final - start)
 
@@ -144,7 +164,9 @@ class Training(_Section):
 
     def noise_at(self, env_steps: int) -> float:
         """The exploration noise std after ``env_steps`` steps (see `exploration_noise_final`)."""
-        return self._schedule(self.exploration_noise, self.exploration_noise_final, env_steps)
+        return self._schedule(
+            self.exploration_noise, self.exploration_noise_final, env_steps, self.exploration_noise_decay_steps
+        )
 
     def design_exploration_at(self, env_steps: int) -> float:
         """The design exploration probability after ``env_steps`` steps."""

@@ -28,6 +28,7 @@ class TD3Config:
     policy_delay: int = 2
     actor_lr: float = 3e-4
     critic_lr: float = 3e-3
+    action_l2: float = 0.0
 
     @classmethod
     def from_training(cls, t) -> TD3Config:
@@ -40,6 +41,7 @@ class TD3Config:
             policy_delay=t.policy_delay,
             actor_lr=t.actor_lr,
             critic_lr=t.critic_lr,
+            action_l2=t.action_l2,
         )
 
 
@@ -97,11 +99,14 @@ class TD3:
             for p in self.critic.parameters():
                 p.requires_grad_(False)
             try:
-                q = self.critic(obs, self.actor(obs))[0]
+                a_pi = self.actor(obs)
+                per_row = -self.critic(obs, a_pi)[0]
+                if cfg.action_l2:  # effort: a static method of each actor class, as finish
+                    per_row = per_row + cfg.action_l2 * self.actor.effort(obs, a_pi)  # type: ignore[operator]
                 if actor_rows is None:
-                    actor_loss = -q.mean()
+                    actor_loss = per_row.mean()
                 else:  # an empty selection is a zero loss: no gradient, no step of any weight
-                    actor_loss = -(q * actor_rows.to(q.dtype)).sum() / actor_rows.sum().clamp(min=1)
+                    actor_loss = (per_row * actor_rows.to(per_row.dtype)).sum() / actor_rows.sum().clamp(min=1)
                 self.actor_opt.zero_grad(set_to_none=True)
                 actor_loss.backward()
             finally:

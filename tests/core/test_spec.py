@@ -3,9 +3,10 @@
 import json
 
 import pytest
+from pydantic import ValidationError
 
 from modsat_core.presets import PRESETS, get_preset
-from modsat_core.spec import JobSpec, SpecError, parse_spec
+from modsat_core.spec import JobSpec, SpecError, Training, parse_spec
 
 
 def messages(data) -> list[str]:
@@ -144,3 +145,17 @@ def test_docs_spec_md_is_generated_from_the_current_schema():
 
     doc = Path(__file__).resolve().parents[2] / "docs" / "spec.md"
     assert doc.read_text() == spec_markdown(), "regenerate with: modsat schema --markdown > docs/spec.md"
+
+
+def test_exploration_noise_schedule():
+    """Constant without a final value; linear from learning_starts to the budget's end, or over
+    `exploration_noise_decay_steps` and then held."""
+    t = Training(total_env_steps=10_000, learning_starts=2_000, exploration_noise=0.1)
+    assert t.noise_at(0) == t.noise_at(9_000) == 0.1
+    t = t.model_copy(update={"exploration_noise_final": 0.0})
+    assert [t.noise_at(s) for s in (0, 2_000, 6_000, 10_000, 20_000)] == pytest.approx([0.1, 0.1, 0.05, 0.0, 0.0])
+    t = t.model_copy(update={"exploration_noise_decay_steps": 4_000})
+    assert [t.noise_at(s) for s in (2_000, 4_000, 6_000, 9_000)] == pytest.approx([0.1, 0.05, 0.0, 0.0])
+    assert t.design_exploration_at(6_000) == t.design_exploration  # design exploration keeps its own schedule
+    with pytest.raises(ValidationError, match="exploration_noise_decay_steps"):
+        Training(exploration_noise_decay_steps=0)
