@@ -13,7 +13,15 @@ def pytest_runtest_makereport(item, call):
 
 
 def pytest_collection_modifyitems(config, items):
-    """Every test of tests/web drives a real browser: marked ``browser``."""
+    """Every test of tests/web drives a real browser: marked ``browser``.
+
+    The files marked ``slow`` (training runs of minutes to half an hour) run first, in collection
+    order: with ``-n auto --dist loadfile --no-loadscope-reorder`` (the README's command) each
+    worker starts on one of them and the fast files fill in behind. xdist's default order (files
+    with the most tests first) started the 28-minute co-design file last, with the other worker
+    idle for most of it.
+    """
     for item in items:
         if "tests/web/" in item.nodeid.replace("\\", "/"):
             item.add_marker(pytest.mark.browser)
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)  # stable: slow first
