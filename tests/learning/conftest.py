@@ -3,8 +3,22 @@
 from __future__ import annotations
 
 import pytest
+import torch
 
 from modsat_core.spec import JobSpec
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """Every learning test trains on one torch thread, as the runs it asserts were measured
+    (`modsat train` and the worker set it; an in-process `train()` does not). Without it a test
+    inherits whatever an earlier test in its process left (`bench_update` sets one thread and
+    does not restore it). Run first in a fresh xdist worker, the co-design test most likely
+    trained on torch's default threads and missed (0.375 against 0.75 in one CI run)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
 
 
 def tiny_spec(**over) -> JobSpec:
