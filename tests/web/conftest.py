@@ -47,6 +47,14 @@ def screenshot_dir() -> Path:
     return d
 
 
+def open_submit_form(page) -> None:
+    """Wait until the page has loaded the default preset into the JSON editor and built the
+    form fields from it. The preset's <option> appears one request earlier (the presets list,
+    then the preset itself), so waiting for the option alone races the editor."""
+    page.wait_for_selector("#preset option[value=quick]", state="attached")
+    page.wait_for_selector("#f-training-total_env_steps", state="attached")
+
+
 def actuator_pixels(png: bytes, box: tuple[float, float, float, float] | None = None) -> int:
     """Pixels of the actuator orange (saturated, hue 15-45 deg) in a PNG, optionally only
     inside ``box`` = (x0, y0, x1, y1) as fractions of the image. The faint target ghost

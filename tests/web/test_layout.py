@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from .conftest import DESKTOP, PHONE, Serve, screenshot_dir
+from .conftest import DESKTOP, PHONE, Serve, open_submit_form, screenshot_dir
 
 N_JOBS = 200
 
@@ -85,7 +85,7 @@ def test_phone_width(crowded, new_page):
 def test_bad_spec_shows_the_field_error_next_to_the_form(crowded, new_page):
     page = new_page(DESKTOP)
     page.goto(crowded.base + "/")
-    page.wait_for_selector("#preset option[value=quick]", state="attached")
+    open_submit_form(page)
     before = crowded.client.get("/api/jobs").json()["total"]
 
     # A value out of range, typed into the JSON editor, and an unknown field.
