@@ -4,11 +4,12 @@
 the `quick` mission (30-90 deg slews, 1 deg and 0.01 rad/s at the end of 120 steps) with
 the CPU presets' recipe: the finer error and rate features, [256, 256], lr 1e-3, one update
 per env step, exploration noise falling to zero, and the hold reward (no progress penalty
-inside the cone, the settle bonus), 40k env steps. docs/learning.md, "Fourth round", runs
-e6 and e24 (this test's run): success 56 % at 20k steps, 97 % at 25k (32 slews). Before this
-recipe no run of this mission landed a slew in the evaluation; the untrained controller lands
-none, so 75 % over 32 slews cannot come by chance. The co-design network's own control-only
-run (e13) is in the same table.
+inside the cone, the settle bonus), 40k env steps, and the actor's action penalty
+(`training.action_l2` 10). docs/learning.md, "Tenth round" (e53-e55): on one torch thread, seed 0
+lands 0, 3, 34, 88, 88, 94, 97 and 100 % of 32 slews at 5k-40k; seeds 1 and 2 reach 91 and
+94 % and end at 78 and 88 %. Without the penalty seed 0 ends at 12.5 % (its best) on one
+thread: the hold chatters through the rate tolerance. The untrained controller lands none,
+so 75 % over 32 slews, reached and held at the end, cannot come by chance.
 """
 
 from __future__ import annotations
@@ -27,12 +28,12 @@ def test_flat_controller_with_the_cpu_recipe_settles_most_slews():
     d = get_preset("quick").model_dump(mode="json")
     d.update(algorithm="td3-control", seed=0)
     d["design"]["fixed_design"] = reference_design(3).tolist()
-    # One update per env step, as in the measured run (e24).
-    d["training"].update(total_env_steps=40_000, train_frequency=1)
+    # One update per env step and the action penalty, as in the measured run (e53).
+    d["training"].update(total_env_steps=40_000, train_frequency=1, action_l2=10.0)
     spec = parse_spec(d)
     report = bench_control(spec, eval_every=5_000)
     rates = [p["success_rate"] for p in report["curve"]]
-    print("success at 5k-25k:", rates, "updates", report["updates"], "wall", report["wall_s"])
+    print("success at 5k-40k:", rates, "updates", report["updates"], "wall", report["wall_s"])
     assert rates[0] == 0.0  # nothing lands at first
-    assert max(rates) >= 0.75
+    assert max(rates) >= 0.75 and rates[-1] >= 0.75  # lands, and still holds at the end
     assert report["pd_baseline"]["success_rate"] == 1.0
