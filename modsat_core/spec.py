@@ -114,6 +114,17 @@ class Training(_Section):
             "from the start. 0 = from the start (the paper)."
         ),
     )
+    design_learning_after_success: float | None = Field(
+        None,
+        gt=0.0,
+        le=1.0,
+        description=(
+            "If set, the actor's design layers are also held until an evaluation on the learning "
+            "curve lands at least this share of its slews on the design being flown (and "
+            "`design_learning_starts` has passed): the design moves only once the controller can fly "
+            "the one it has. Once reached, the design learns to the end of the run. null = no gate."
+        ),
+    )
     n_step: int = Field(
         1,
         ge=1,

@@ -180,10 +180,19 @@ class TD3Run:
         n = self.t.batch_size
         obs, nxt = both.rows(0, n), both.rows(n, 2 * n)
         action = b["action"].float()
-        # Until design_learning_starts the design layers are held: the controller learns to fly
-        # the design the policy starts from (and the explored ones near it) before it moves.
-        actor_rows = ~obs.design if self.env_steps < self.t.design_learning_starts else None
+        # While the design layers are held the controller learns to fly the design the policy
+        # starts from (and the explored ones near it) before the design moves.
+        actor_rows = None if self.design_released() else ~obs.design
         self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount, actor_rows)
+
+    def design_released(self) -> bool:
+        """Whether the actor's design layers learn: after `design_learning_starts` env steps and,
+        with `design_learning_after_success`, once an evaluation on the curve has landed that
+        share of its slews (read from the curve, so a resumed run keeps the gate's state)."""
+        if self.env_steps < self.t.design_learning_starts:
+            return False
+        gate = self.t.design_learning_after_success
+        return gate is None or any(p.get("success_rate", 0.0) >= gate for p in self.curve)
 
     def evaluate_now(self) -> dict:
         actor = self._eval_actor()

@@ -193,3 +193,41 @@ def test_design_layers_hold_until_design_learning_starts():
     assert any(
         k.startswith("design.") and not torch.equal(before[k], v) for k, v in free.agent.actor.state_dict().items()
     )
+
+
+def test_design_layers_hold_until_the_curve_lands_the_gate_share():
+    """With `design_learning_after_success` the design layers stay held past
+    `design_learning_starts` while no evaluation on the curve lands that share of its slews; one
+    that does releases them, and a resumed run reads the gate's state back from the curve."""
+    from modsat_core.td3_run import TD3Run
+
+    spec = tiny_spec(training__network="set", design__repair=True, training__design_learning_after_success=0.5)
+    run = TD3Run(spec)
+    before = {k: v.clone() for k, v in run.agent.actor.state_dict().items()}
+    run.run(lambda _p: None, lambda _c: None, lambda: False)
+    # The tiny mission (12 steps, 0.05 N m) is not landed in 480 steps: the gate stays shut.
+    assert run.curve and max(p["success_rate"] for p in run.curve) < 0.5
+    assert not run.design_released()
+    after = run.agent.actor.state_dict()
+    moved = {k for k in before if not torch.equal(before[k], after[k])}
+    assert moved and all(k.startswith("control.") for k in moved), sorted(moved)
+
+    landed = dict(run.curve[-1], success_rate=0.5)
+    run.curve.append(landed)
+    assert run.design_released()
+    state = run.state_dict()
+    resumed = TD3Run(spec)
+    assert not resumed.design_released()
+    resumed.load_state_dict(state)
+    assert resumed.design_released()
+    # The step count still applies: a gate met before `design_learning_starts` waits for it.
+    late = TD3Run(
+        tiny_spec(
+            training__network="set",
+            design__repair=True,
+            training__design_learning_after_success=0.5,
+            training__design_learning_starts=10**6,
+        )
+    )
+    late.load_state_dict(state)
+    assert not late.design_released()
