@@ -29,6 +29,12 @@ class MLPActor(nn.Module):
         """(B,) sum of the squared actions of each row (`training.action_l2`)."""
         return action.square().sum(-1)
 
+    @staticmethod
+    def imitation(obs: Tensor, action: Tensor, behaviour: Tensor) -> tuple[Tensor, Tensor]:
+        """(B,) zeros and no rows: the flat controller has no design actions (`training.design_bc`)."""
+        zero = action.new_zeros(action.shape[0])
+        return zero, zero.bool()
+
 
 class MLPCritic(nn.Module):
     def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):

@@ -63,6 +63,15 @@ def effort(obs: CellObs, action: Tensor) -> Tensor:
     return action.square().sum((1, 2)) * (~obs.design).to(action.dtype)
 
 
+def imitation(obs: CellObs, action: Tensor, behaviour: Tensor) -> tuple[Tensor, Tensor]:
+    """(B,) squared distance between a design row's actions and the replay's, summed over the
+    three values and averaged over the acting cells, 0 on flying rows; and (B,) bool, the
+    design rows. The actor's behaviour-cloning term of `training.design_bc`."""
+    gap = (action - behaviour).square().sum(-1)
+    mask = obs.act_mask.to(gap.dtype)
+    return (gap * mask).sum(1) / mask.sum(1).clamp(min=1.0) * obs.design.to(gap.dtype), obs.design
+
+
 def masked_mean(t: Tensor, mask: Tensor) -> Tensor:
     """Mean of (B, C, k) over the cells where ``mask`` (B, C) is true (zeros where none is)."""
     w = mask.to(t.dtype)
@@ -94,6 +103,7 @@ class CellActor(nn.Module):
 
     finish = staticmethod(finish)
     effort = staticmethod(effort)
+    imitation = staticmethod(imitation)
 
 
 class CellCritic(nn.Module):
@@ -199,6 +209,7 @@ class SetActor(nn.Module):
 
     finish = staticmethod(finish)
     effort = staticmethod(effort)
+    imitation = staticmethod(imitation)
 
 
 class _SetCriticPhase(nn.Module):

@@ -125,6 +125,19 @@ class Training(_Section):
             "the one it has. Once reached, the design learns to the end of the run. null = no gate."
         ),
     )
+    design_bc: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description=(
+            "Weight of a behaviour-cloning term on the actor's design actions, as TD3+BC (Fujimoto "
+            "and Gu 2021): the squared distance between the design head's outputs and the design "
+            "actions in the replay, times the mean |Q| of the batch's design rows, is added to the "
+            "design rows' loss. It keeps the design head near the designs that have been flown, "
+            "where the critic has data, instead of following the critic to designs it has never "
+            "seen (e67: released at once, the design went from 27 modules to 1). 0 = off (the paper)."
+        ),
+    )
     n_step: int = Field(
         1,
         ge=1,

@@ -29,6 +29,7 @@ class TD3Config:
     actor_lr: float = 3e-4
     critic_lr: float = 3e-3
     action_l2: float = 0.0
+    design_bc: float = 0.0
 
     @classmethod
     def from_training(cls, t) -> TD3Config:
@@ -42,6 +43,7 @@ class TD3Config:
             actor_lr=t.actor_lr,
             critic_lr=t.critic_lr,
             action_l2=t.action_l2,
+            design_bc=t.design_bc,
         )
 
 
@@ -100,7 +102,13 @@ class TD3:
                 p.requires_grad_(False)
             try:
                 a_pi = self.actor(obs)
-                per_row = -self.critic(obs, a_pi)[0]
+                q_pi = self.critic(obs, a_pi)[0]
+                per_row = -q_pi
+                if cfg.design_bc:  # imitation: a static method of each actor class, as effort
+                    gap, rows = self.actor.imitation(obs, a_pi, action)  # type: ignore[operator]
+                    w = rows.to(q_pi.dtype)  # TD3+BC's scale: the mean |Q| of the rows imitated
+                    scale = (q_pi.detach().abs() * w).sum() / w.sum().clamp(min=1.0)
+                    per_row = per_row + cfg.design_bc * scale * gap
                 if cfg.action_l2:  # effort: a static method of each actor class, as finish
                     per_row = per_row + cfg.action_l2 * self.actor.effort(obs, a_pi)  # type: ignore[operator]
                 if actor_rows is None:
