@@ -67,7 +67,8 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str]
     sim = SlewSim.from_designs([design] * B, m, spec.modules, dtype=torch.float32)
     sim.reset(list(range(B)), [draw_episode(r, m) for r in rngs])
     obs_dim, act_dim = flat_state(sim).shape[1], 3 * K
-    agent = TD3(MLPActor(obs_dim, act_dim, hidden), MLPCritic(obs_dim, act_dim, hidden), TD3Config.from_training(t))
+    critic = MLPCritic(obs_dim, act_dim, hidden, t.critic_layer_norm)
+    agent = TD3(MLPActor(obs_dim, act_dim, hidden), critic, TD3Config.from_training(t))
     buf = ReplayBuffer(
         {
             "o": ((obs_dim,), torch.float32),

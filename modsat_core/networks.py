@@ -42,13 +42,14 @@ SET_CELL_WIDTH = 32
 DESIGN_STRUCTURE_BIAS = 1.0
 
 
-def mlp(sizes: list[int]) -> nn.Sequential:
-    """Linear layers with ReLU between them (none after the last)."""
+def mlp(sizes: list[int], layer_norm: bool = False) -> nn.Sequential:
+    """Linear layers with ReLU between them (none after the last); ``layer_norm`` puts a
+    LayerNorm before each ReLU (`training.critic_layer_norm`)."""
     layers: list[nn.Module] = []
     for i in range(len(sizes) - 1):
         layers.append(nn.Linear(sizes[i], sizes[i + 1]))
         if i < len(sizes) - 2:
-            layers.append(nn.ReLU())
+            layers += [nn.LayerNorm(sizes[i + 1]), nn.ReLU()] if layer_norm else [nn.ReLU()]
     return nn.Sequential(*layers)
 
 
@@ -116,10 +117,10 @@ class CellCritic(nn.Module):
     diluted as much (docs/learning.md).
     """
 
-    def __init__(self, n_features: int, hidden: list[int]):
+    def __init__(self, n_features: int, hidden: list[int], layer_norm: bool = False):
         super().__init__()
-        self.q1 = mlp([n_features + 6, *hidden, 1])
-        self.q2 = mlp([n_features + 6, *hidden, 1])
+        self.q1 = mlp([n_features + 6, *hidden, 1], layer_norm)
+        self.q2 = mlp([n_features + 6, *hidden, 1], layer_norm)
 
     def forward(self, obs: CellObs, action: Tensor) -> tuple[Tensor, Tensor]:
         mean_a = masked_mean(action, obs.act_mask)
@@ -221,13 +222,13 @@ class _SetCriticPhase(nn.Module):
     layers are fused into one.
     """
 
-    def __init__(self, n_features: int, hidden: list[int], cell_width: int):
+    def __init__(self, n_features: int, hidden: list[int], cell_width: int, layer_norm: bool = False):
         super().__init__()
         self.width = cell_width
         self.state_encoder = nn.Sequential(nn.Linear(n_features, 2 * cell_width), nn.ReLU(inplace=True))
         self.action_encoder = nn.Sequential(nn.Linear(n_features + 3, 2 * cell_width), nn.ReLU())
-        self.q1 = mlp([2 * cell_width + n_features + 3, *hidden, 1])
-        self.q2 = mlp([2 * cell_width + n_features + 3, *hidden, 1])
+        self.q1 = mlp([2 * cell_width + n_features + 3, *hidden, 1], layer_norm)
+        self.q2 = mlp([2 * cell_width + n_features + 3, *hidden, 1], layer_norm)
 
     def forward(self, x: Tensor, act_mask: Tensor, value_mask: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
         B = x.shape[0]
@@ -249,10 +250,10 @@ class _SetCriticPhase(nn.Module):
 class SetCritic(nn.Module):
     """Twin critics of the set architecture, one pair per phase (see :class:`SetActor`)."""
 
-    def __init__(self, n_features: int, hidden: list[int], cell_width: int = SET_CELL_WIDTH):
+    def __init__(self, n_features: int, hidden: list[int], layer_norm: bool = False, cell_width: int = SET_CELL_WIDTH):
         super().__init__()
-        self.design = _SetCriticPhase(n_features, hidden, cell_width)
-        self.control = _SetCriticPhase(n_features, hidden, cell_width)
+        self.design = _SetCriticPhase(n_features, hidden, cell_width, layer_norm)
+        self.control = _SetCriticPhase(n_features, hidden, cell_width, layer_norm)
 
     def forward(self, obs: CellObs, action: Tensor) -> tuple[Tensor, Tensor]:
         d = obs.design
@@ -285,7 +286,7 @@ def make_actor(network: str, n_features: int, hidden: list[int]) -> nn.Module:
     return _ACTORS[network](n_features, list(hidden))
 
 
-def make_critic(network: str, n_features: int, hidden: list[int]) -> nn.Module:
-    """The twin critic that goes with :func:`make_actor`'s actor."""
+def make_critic(network: str, n_features: int, hidden: list[int], layer_norm: bool = False) -> nn.Module:
+    """The twin critic that goes with :func:`make_actor`'s actor (``layer_norm``: see :func:`mlp`)."""
     _check(network)
-    return _CRITICS[network](n_features, list(hidden))
+    return _CRITICS[network](n_features, list(hidden), layer_norm)

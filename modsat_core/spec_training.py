@@ -122,6 +122,14 @@ class Training(_Section):
             "stopping at the episode's end). 1 = the paper's one-step TD3."
         ),
     )
+    critic_layer_norm: bool = Field(
+        False,
+        description=(
+            "Layer normalisation before each ReLU of the critics' wide layers (as in "
+            "CrossQ, Bhatt et al. 2024, and FastTD3), against the critic's drift on the long "
+            "runs the paper's mission needs. false = the paper's critic."
+        ),
+    )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
     noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
     action_l2: float = Field(

@@ -42,7 +42,7 @@ class TD3Run:
         self.env = CoDesignEnv(spec, self.t.num_envs, seed=spec.seed, fixed_grid=self.fixed_grid, device=device)
         torch.manual_seed(spec.seed)
         actor = new_actor(spec).to(device)
-        critic = make_critic(self.t.network, N_FEATURES, list(self.t.hidden_sizes)).to(device)
+        critic = make_critic(self.t.network, N_FEATURES, list(self.t.hidden_sizes), self.t.critic_layer_norm).to(device)
         self.agent = TD3(actor, critic, TD3Config.from_training(self.t))
         capacity = min(self.t.buffer_size, max(self.t.total_env_steps, self.t.batch_size))
         self.buffer = ReplayBuffer(replay_fields(self.env.N), capacity, device=device)
