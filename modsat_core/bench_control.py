@@ -81,6 +81,7 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str]
     )
     curve: list[dict] = []
     steps, credit, next_eval, t0 = 0, 0.0, eval_every, time.monotonic()
+    noise_u = torch.rand(B, generator=gen) if t.exploration_noise_min is not None else torch.zeros(B)
 
     def evaluate() -> dict:
         mc = monte_carlo(
@@ -128,12 +129,15 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str]
         else:
             with torch.no_grad():
                 a = agent.actor(o)
-            a = (a + torch.randn(a.shape, generator=gen) * t.noise_at(steps)).clamp(-1.0, 1.0)
+            std = t.noise_stds(steps, noise_u).unsqueeze(-1)
+            a = (a + torch.randn(a.shape, generator=gen) * std).clamp(-1.0, 1.0)
         out = sim.step(a.reshape(B, K, 3))
         buf.add({"o": o, "a": a, "r": out.reward.float(), "o2": flat_state(sim), "d": out.terminated})
         ended = (out.terminated | out.truncated).nonzero().flatten().tolist()
         if ended:
             sim.reset(ended, [draw_episode(rngs[i], m) for i in ended])
+            if t.exploration_noise_min is not None:
+                noise_u[ended] = torch.rand(len(ended), generator=gen)
         steps += B
         if steps >= t.learning_starts and buf.size >= t.batch_size:
             credit += B / t.train_frequency

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
+import torch
 from pydantic import Field, field_validator
+from torch import Tensor
 
 from .spec_sections import _Section
 
@@ -53,6 +55,17 @@ class Training(_Section):
         description=(
             "Env steps (counted from `learning_starts`) over which the exploration noise falls to "
             "`exploration_noise_final`, then stays there. null = over the whole budget."
+        ),
+    )
+    exploration_noise_min: float | None = Field(
+        None,
+        gt=0.0,
+        le=2.0,
+        description=(
+            "If set, each training episode draws its own noise std, log-uniformly between this and "
+            "the scheduled noise (FastTD3's per-environment noise scales, on a log scale): some "
+            "episodes explore widely while others fly near the deterministic policy and show the "
+            "critic the fine torques a hold needs. null = one std for every episode."
         ),
     )
     design_exploration: float = Field(
@@ -174,6 +187,14 @@ class Training(_Section):
         return self._schedule(
             self.exploration_noise, self.exploration_noise_final, env_steps, self.exploration_noise_decay_steps
         )
+
+    def noise_stds(self, env_steps: int, u: Tensor) -> Tensor:
+        """Per-episode noise stds for the episodes' draws ``u`` in [0, 1) (see `exploration_noise_min`)."""
+        top = self.noise_at(env_steps)
+        low = self.exploration_noise_min
+        if low is None or top <= low:
+            return torch.full_like(u, top)
+        return low * (top / low) ** u
 
     def design_exploration_at(self, env_steps: int) -> float:
         """The design exploration probability after ``env_steps`` steps."""

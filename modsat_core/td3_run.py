@@ -58,6 +58,10 @@ class TD3Run:
         self.recent: list[dict] = []  # finished training episodes since the last progress call
         self.last_info: dict = {}
         self.explore_design = torch.ones(self.env.B, dtype=torch.bool, device=device)
+        # Each episode's place in [exploration_noise_min, noise], drawn when it starts (only
+        # with `exploration_noise_min`: runs without it keep their random streams).
+        self.noise_u = torch.zeros(self.env.B, device=device)
+        self._draw_noise(torch.ones(self.env.B, dtype=torch.bool, device=device))
 
     # ------------------------------------------------------------------ acting
     def _act(self, obs: CellObs) -> torch.Tensor:
@@ -68,7 +72,8 @@ class TD3Run:
         else:
             with torch.no_grad():
                 a = self.agent.actor(obs)
-        noise = torch.randn(a.shape, generator=self.gen, device=self.device) * self.t.noise_at(self.env_steps)
+        std = self.t.noise_stds(self.env_steps, self.noise_u).reshape(B, 1, 1)
+        noise = torch.randn(a.shape, generator=self.gen, device=self.device) * std
         explore = self._explored_designs(obs)
         # Designing rows of an episode whose design is not explored grow the policy's own design.
         a = a + noise * (~obs.design | explore).reshape(B, 1, 1)
@@ -87,6 +92,11 @@ class TD3Run:
             rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
             a = torch.where(obs.design.reshape(B, 1, 1), a, rand)
         return finish(obs, a)
+
+    def _draw_noise(self, starting: torch.Tensor) -> None:
+        if self.t.exploration_noise_min is not None and bool(starting.any()):
+            draw = torch.rand(self.env.B, generator=self.gen, device=self.device)
+            self.noise_u = torch.where(starting, draw, self.noise_u)
 
     def _explored_designs(self, obs: CellObs) -> torch.Tensor:
         """(B,) bool: the episodes whose design phase is explored (`design_exploration_episodes`).
@@ -144,6 +154,7 @@ class TD3Run:
                 }
             )
             self.recent.extend(st.finished)
+            self._draw_noise(st.done)
             self.env_steps += B
             if self.env_steps >= self.t.learning_starts and self.buffer.size >= self.t.batch_size:
                 self.update_credit += B / self.t.train_frequency
@@ -251,6 +262,7 @@ class TD3Run:
             "cpu_gen": self.cpu_gen.get_state(),
             "rng": self.rng.bit_generator.state,
             "explore_design": self.explore_design.cpu().clone(),
+            "noise_u": self.noise_u.cpu().clone(),
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -269,6 +281,8 @@ class TD3Run:
         self.cpu_gen.set_state(d["cpu_gen"])
         self.rng.bit_generator.state = d["rng"]
         self.explore_design.copy_(d["explore_design"])
+        if "noise_u" in d:  # checkpoints from before `exploration_noise_min` have none
+            self.noise_u.copy_(d["noise_u"])
 
 
 def _rank(point: dict) -> tuple[float, float]:
