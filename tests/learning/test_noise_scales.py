@@ -17,7 +17,7 @@ def test_stds_are_log_uniform_between_the_floor_and_the_scheduled_noise():
     t = tiny_spec(training__exploration_noise=0.1, training__exploration_noise_min=0.001).training
     u = torch.tensor([0.0, 0.5, 1.0])
     assert torch.allclose(t.noise_stds(0, u), torch.tensor([0.001, 0.01, 0.1]), rtol=1e-5)
-    # a million draws: a third of the decades each, so half the episodes fly below 0.01
+    # a million draws, log-uniform over two decades: half the episodes fly below 0.01
     many = t.noise_stds(0, torch.rand(10**6, generator=torch.Generator().manual_seed(0)))
     assert abs(float((many < 0.01).float().mean()) - 0.5) < 0.005
     assert float(many.min()) >= 0.001 and float(many.max()) <= 0.1
