@@ -4,13 +4,14 @@ sections are in :mod:`modsat_core.spec_sections`)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-import torch
 from pydantic import Field, field_validator
-from torch import Tensor
 
 from .spec_sections import _Section
+
+if TYPE_CHECKING:  # validating a spec imports no torch (tests/core/test_layers.py)
+    from torch import Tensor
 
 
 class Training(_Section):
@@ -190,6 +191,8 @@ class Training(_Section):
 
     def noise_stds(self, env_steps: int, u: Tensor) -> Tensor:
         """Per-episode noise stds for the episodes' draws ``u`` in [0, 1) (see `exploration_noise_min`)."""
+        import torch
+
         top = self.noise_at(env_steps)
         low = self.exploration_noise_min
         if low is None or top <= low:
