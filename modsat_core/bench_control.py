@@ -28,11 +28,22 @@ from .envs import reference_design
 from .evaluate import monte_carlo
 from .features import control_globals
 from .flat_networks import MLPActor, MLPCritic
-from .mission import draw_episode
+from .mission import draw_episode, relabel
 from .pd import PDController
 from .slew import Design, SlewSim
 from .spec import JobSpec
 from .td3 import TD3, ReplayBuffer, TD3Config
+
+_CURVE_KEYS = (
+    "mean_return",
+    "success_rate",
+    "success_rate_at_0.25_deg",
+    "success_rate_at_1_deg",
+    "safety_violations",
+    "median_final_error_deg",
+    "median_final_rate_rad_s",
+    "median_slew_time_ratio",
+)
 
 
 def flat_state(sim: SlewSim) -> Tensor:
@@ -50,8 +61,11 @@ class _Controller:
         return self.actor(flat_state(sim)).reshape(sim.B, self.K, 3).to(sim.dtype)
 
 
-def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str], None] | None = None) -> dict:
-    """Train and evaluate; returns the curve and the cost (JSON-ready)."""
+def bench_control(
+    spec: JobSpec, *, eval_every: int = 5_000, eval_target: bool = False, log: Callable[[str], None] | None = None
+) -> dict:
+    """Train and evaluate; returns the curve and the cost (JSON-ready). ``eval_target``: each
+    evaluation also flies the target actor (TD3's Polyak average of the actor), as ``"target"``."""
     m, t = spec.mission, spec.training
     grid = (
         np.asarray(spec.design.fixed_design)
@@ -83,10 +97,10 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str]
     steps, credit, next_eval, t0 = 0, 0.0, eval_every, time.monotonic()
     noise_u = torch.rand(B, generator=gen) if t.exploration_noise_min is not None else torch.zeros(B)
 
-    def evaluate() -> dict:
+    def fly(actor: torch.nn.Module) -> dict:
         mc = monte_carlo(
             design,
-            _Controller(agent.actor, K),
+            _Controller(actor, K),
             m,
             spec.modules,
             episodes=spec.evaluation.episodes,
@@ -94,32 +108,26 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str]
             dtype=torch.float64,
         )
         s = mc.summary((0.25, 1.0))
-        point = {
-            "env_steps": steps,
-            "updates": agent.updates,
-            "wall_s": round(time.monotonic() - t0, 1),
-            **{
-                k: s[k]
-                for k in (
-                    "mean_return",
-                    "success_rate",
-                    "success_rate_at_0.25_deg",
-                    "success_rate_at_1_deg",
-                    "safety_violations",
-                    "median_final_error_deg",
-                    "median_final_rate_rad_s",
-                    "median_slew_time_ratio",
-                )
-            },
-        }
-        curve.append(point)
+        return {k: s[k] for k in _CURVE_KEYS}
+
+    def say(who: str, p: dict) -> None:
         if log is not None:
             log(
-                f"  {steps:,} steps, {agent.updates:,} updates, {point['wall_s']:,.0f} s: return "
-                f"{point['mean_return']:.1f}, success {100 * point['success_rate']:.0f} %, median error "
-                f"{point['median_final_error_deg']:.2f} deg, median final rate "
-                f"{point['median_final_rate_rad_s']:.4f} rad/s"
+                f"  {steps:,} steps, {agent.updates:,} updates, {p['wall_s']:,.0f} s{who}: return "
+                f"{p['mean_return']:.1f}, success {100 * p['success_rate']:.0f} %, median error "
+                f"{p['median_final_error_deg']:.2f} deg, median final rate "
+                f"{p['median_final_rate_rad_s']:.4f} rad/s"
             )
+
+    def evaluate() -> dict:
+        point: dict = {"env_steps": steps, "updates": agent.updates, "wall_s": round(time.monotonic() - t0, 1)}
+        point.update(fly(agent.actor))
+        say("", point)
+        if eval_target:
+            target = fly(agent.actor_target)
+            point["target"] = target
+            say(" (target actor)", {**point, **target})
+        curve.append(point)
         return point
 
     while steps + B <= t.total_env_steps:
@@ -143,7 +151,13 @@ def bench_control(spec: JobSpec, *, eval_every: int = 5_000, log: Callable[[str]
             credit += B / t.train_frequency
             while credit >= 1.0:
                 credit -= 1.0
+                if t.lr_final_fraction is not None:
+                    agent.set_lr_scale(t.lr_scale_at(steps))
                 b = buf.sample(t.batch_size, gen)
+                if t.hold_cone_start_deg is not None:  # flat state: q_BT at 0:4, omega / rate limit at 8:11
+                    cone = t.hold_cone_deg(steps, m.tolerance_deg)
+                    omega = b["o2"][:, 8:11] * m.rate_limit_rad_s
+                    b["r"] = relabel(b["r"], b["o"][:, :4], b["o2"][:, :4], omega, b["d"], m, cone)
                 agent.update(b["o"], b["a"], b["r"], b["o2"], b["d"], gen)
         if steps >= next_eval:
             evaluate()

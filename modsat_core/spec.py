@@ -61,6 +61,17 @@ class JobSpec(_Section):
             raise ValueError("algorithm 'td3-control' needs design.fixed_design")
         if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
             raise ValueError("modules.momentum_capacity_Nms is only meaningful with actuator_model 'reaction-wheel'")
+        cone = self.training.hold_cone_start_deg
+        if cone is not None and cone < self.mission.tolerance_deg:
+            raise ValueError(
+                f"training.hold_cone_start_deg ({cone}) must be at least mission.tolerance_deg "
+                f"({self.mission.tolerance_deg}): the curriculum's cone shrinks to the tolerance"
+            )
+        if cone is not None and self.training.n_step > 1:
+            raise ValueError(
+                "training.hold_cone_start_deg works with one-step returns only (training.n_step 1): "
+                "an n-step return's rewards are summed in the buffer's sample, before they could be recomputed"
+            )
         return self
 
 

@@ -69,6 +69,37 @@ class Training(_Section):
             "critic the fine torques a hold needs. null = one std for every episode."
         ),
     )
+    lr_final_fraction: float | None = Field(
+        None,
+        gt=0.0,
+        le=1.0,
+        description=(
+            "If set, both learning rates fall linearly from their values (when learning starts) to "
+            "this fraction of them at the end of the budget: late updates fine-tune the policy "
+            "instead of moving it as far as the early ones. null = constant rates (the paper)."
+        ),
+    )
+    hold_cone_start_deg: float | None = Field(
+        None,
+        gt=0.0,
+        le=180.0,
+        description=(
+            "A tolerance curriculum: the reward's hold terms (the in-tolerance and settle bonuses, and "
+            "the progress penalty's exemption inside the cone) are paid inside a cone that starts at "
+            "this angle and shrinks geometrically to `mission.tolerance_deg` over `hold_cone_steps`. "
+            "Rewards are recomputed when a batch is sampled, so the replay follows the current cone; "
+            "success and every evaluation use the mission's tolerance. null = the mission's cone."
+        ),
+    )
+    hold_cone_steps: int | None = Field(
+        None,
+        ge=1,
+        le=1_000_000_000,
+        description=(
+            "Env steps (counted from `learning_starts`) over which the cone of `hold_cone_start_deg` "
+            "shrinks to the mission's tolerance, then stays there. null = over the whole budget."
+        ),
+    )
     design_exploration: float = Field(
         0.1, ge=0.0, le=1.0, description="Probability that a cell's design action is replaced by a random type."
     )
@@ -188,6 +219,17 @@ class Training(_Section):
         return self._schedule(
             self.exploration_noise, self.exploration_noise_final, env_steps, self.exploration_noise_decay_steps
         )
+
+    def lr_scale_at(self, env_steps: int) -> float:
+        """The factor on both learning rates after ``env_steps`` steps (see `lr_final_fraction`)."""
+        return self._schedule(1.0, self.lr_final_fraction, env_steps)
+
+    def hold_cone_deg(self, env_steps: int, tolerance_deg: float) -> float:
+        """The cone of the reward's hold terms after ``env_steps`` steps (see `hold_cone_start_deg`)."""
+        start = self.hold_cone_start_deg
+        if start is None:
+            return tolerance_deg
+        return start * (tolerance_deg / start) ** self._schedule(0.0, 1.0, env_steps, self.hold_cone_steps)
 
     def noise_stds(self, env_steps: int, u: Tensor) -> Tensor:
         """Per-episode noise stds for the episodes' draws ``u`` in [0, 1) (see `exploration_noise_min`)."""

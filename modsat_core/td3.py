@@ -60,6 +60,12 @@ class TD3:
         self.critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr)
         self.updates = 0
 
+    def set_lr_scale(self, scale: float) -> None:
+        """Both optimisers' learning rates at ``scale`` times the configured ones."""
+        for opt, lr in ((self.actor_opt, self.cfg.actor_lr), (self.critic_opt, self.cfg.critic_lr)):
+            for group in opt.param_groups:
+                group["lr"] = lr * scale
+
     def update(
         self,
         obs,

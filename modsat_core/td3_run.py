@@ -20,7 +20,7 @@ from .checkpoint import (
     to_cpu,
     to_device,
 )
-from .codesign_env import CoDesignEnv, Compact, observe_compact
+from .codesign_env import CoDesignEnv, Compact, observe_compact, relabel_rows
 from .features import N_FEATURES, CellObs
 from .networks import finish, make_critic
 from .policy import design_with
@@ -185,6 +185,9 @@ class TD3Run:
         else:
             b = self.buffer.sample(self.t.batch_size, self.gen)
         N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
+        if self.t.hold_cone_start_deg is not None:
+            m = self.spec.mission
+            b["reward"] = relabel_rows(b, D, m, self.t.hold_cone_deg(self.env_steps, m.tolerance_deg))
         # One feature pass over both halves of the transitions (half the small ops of two).
         pair = {k: torch.cat((b["obs_" + k], b["next_" + k])) for k in Compact.FIELDS}
         both = observe_compact(Compact.from_dict(pair), N, D, rl)
@@ -194,6 +197,8 @@ class TD3Run:
         # While the design layers are held the controller learns to fly the design the policy
         # starts from (and the explored ones near it) before the design moves.
         actor_rows = None if self.design_released() else ~obs.design
+        if self.t.lr_final_fraction is not None:
+            self.agent.set_lr_scale(self.t.lr_scale_at(self.env_steps))
         self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount, actor_rows)
 
     def design_released(self) -> bool:

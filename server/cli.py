@@ -98,7 +98,7 @@ def _cmd_bench_control(args: argparse.Namespace) -> int:
         if os.path.isdir(args.out):
             raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
         os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    report = bench_control(spec, eval_every=args.eval_every, log=_log)
+    report = bench_control(spec, eval_every=args.eval_every, eval_target=args.eval_target, log=_log)
     _print_report(report, args.out)
     return 0
 
@@ -479,6 +479,9 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--seed", type=int, help="override the seed")
     bc.add_argument("--hidden", type=int, nargs="+", help="hidden layer sizes (default: training.hidden_sizes)")
     bc.add_argument("--eval-every", type=int, default=5_000, help="env steps between evaluations (default 5,000)")
+    bc.add_argument(
+        "--eval-target", action="store_true", help="also evaluate the target actor (the Polyak average of the actor)"
+    )
     bc.add_argument("--out", help="also write the JSON report to this file")
     bc.set_defaults(func=_cmd_bench_control, device=None)
 
