@@ -151,8 +151,7 @@ def bench_control(
             credit += B / t.train_frequency
             while credit >= 1.0:
                 credit -= 1.0
-                if t.lr_final_fraction is not None:
-                    agent.set_lr_scale(t.lr_scale_at(steps))
+                agent.schedule(t, steps)
                 b = buf.sample(t.batch_size, gen)
                 if t.hold_cone_start_deg is not None:  # flat state: q_BT at 0:4, omega / rate limit at 8:11
                     cone = t.hold_cone_deg(steps, m.tolerance_deg)

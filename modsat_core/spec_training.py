@@ -176,6 +176,17 @@ class Training(_Section):
         ),
     )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
+    policy_noise_final: float | None = Field(
+        None,
+        ge=0.0,
+        le=2.0,
+        description=(
+            "If set, the target smoothing std falls linearly from `policy_noise` (when learning "
+            "starts) to this value at the end of the budget: early on it steadies the critic, late "
+            "it would blur the small torques a hold needs (a 0.2 std kick is 0.03 rad/s per step on "
+            "the full 3x3x3 cube). null = constant (the paper)."
+        ),
+    )
     noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
     action_l2: float = Field(
         0.0,
@@ -219,6 +230,10 @@ class Training(_Section):
         return self._schedule(
             self.exploration_noise, self.exploration_noise_final, env_steps, self.exploration_noise_decay_steps
         )
+
+    def policy_noise_at(self, env_steps: int) -> float:
+        """The target smoothing std after ``env_steps`` steps (see `policy_noise_final`)."""
+        return self._schedule(self.policy_noise, self.policy_noise_final, env_steps)
 
     def lr_scale_at(self, env_steps: int) -> float:
         """The factor on both learning rates after ``env_steps`` steps (see `lr_final_fraction`)."""

@@ -59,12 +59,21 @@ class TD3:
         self.actor_opt = torch.optim.Adam(actor.parameters(), lr=cfg.actor_lr)
         self.critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr)
         self.updates = 0
+        self.policy_noise = cfg.policy_noise  # the target smoothing std now (a schedule may move it)
 
     def set_lr_scale(self, scale: float) -> None:
         """Both optimisers' learning rates at ``scale`` times the configured ones."""
         for opt, lr in ((self.actor_opt, self.cfg.actor_lr), (self.critic_opt, self.cfg.critic_lr)):
             for group in opt.param_groups:
                 group["lr"] = lr * scale
+
+    def schedule(self, t, env_steps: int) -> None:
+        """Before an update: the learning rates and the target smoothing a spec's ``training``
+        section schedules for ``env_steps`` (nothing changes where it schedules none)."""
+        if t.lr_final_fraction is not None:
+            self.set_lr_scale(t.lr_scale_at(env_steps))
+        if t.policy_noise_final is not None:
+            self.policy_noise = t.policy_noise_at(env_steps)
 
     def update(
         self,
@@ -86,7 +95,7 @@ class TD3:
         cfg = self.cfg
         with torch.no_grad():
             next_a = self.actor_target(next_obs)
-            noise = torch.randn(next_a.shape, generator=generator, device=next_a.device) * cfg.policy_noise
+            noise = torch.randn(next_a.shape, generator=generator, device=next_a.device) * self.policy_noise
             # finish: a static method of each actor class; typed nn.Module, mypy sees __getattr__'s Tensor | Module.
             next_a = self.actor_target.finish(  # type: ignore[operator]
                 next_obs, next_a + noise.clamp(-cfg.noise_clip, cfg.noise_clip)

@@ -197,8 +197,7 @@ class TD3Run:
         # While the design layers are held the controller learns to fly the design the policy
         # starts from (and the explored ones near it) before the design moves.
         actor_rows = None if self.design_released() else ~obs.design
-        if self.t.lr_final_fraction is not None:
-            self.agent.set_lr_scale(self.t.lr_scale_at(self.env_steps))
+        self.agent.schedule(self.t, self.env_steps)
         self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount, actor_rows)
 
     def design_released(self) -> bool:

@@ -1,4 +1,5 @@
-"""`training.lr_final_fraction`: both learning rates fall linearly over the budget."""
+"""TD3's schedules over the budget: `training.lr_final_fraction` (both learning rates) and
+`training.policy_noise_final` (the target smoothing std)."""
 
 from __future__ import annotations
 
@@ -29,6 +30,20 @@ def test_the_scale_falls_from_one_when_learning_starts_to_the_fraction_at_the_en
     for bad in (0.0, -0.1, 1.5):
         with pytest.raises(ValidationError, match="lr_final_fraction"):
             tiny_spec(training__lr_final_fraction=bad)
+
+
+def test_the_target_smoothing_falls_to_its_final_value():
+    t = tiny_spec(training__policy_noise=0.2, training__policy_noise_final=0.01).training
+    assert t.policy_noise_at(96) == 0.2 and math.isclose(t.policy_noise_at(96 + 192), 0.105)
+    assert math.isclose(t.policy_noise_at(480), 0.01)
+    assert tiny_spec().training.policy_noise_at(480) == 0.2  # off by default: the paper's constant std
+    run = TD3Run(tiny_spec(training__policy_noise=0.2, training__policy_noise_final=0.01, design__repair=True))
+    assert run.agent.policy_noise == 0.2
+    run.run(lambda p: None, lambda ck: None, lambda: False)
+    assert math.isclose(run.agent.policy_noise, 0.01)
+    plain = TD3Run(tiny_spec(design__repair=True))
+    plain.run(lambda p: None, lambda ck: None, lambda: False)
+    assert plain.agent.policy_noise == 0.2
 
 
 def test_a_run_s_updates_use_the_scheduled_rates():
