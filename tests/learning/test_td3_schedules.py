@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 
 import pytest
-import torch
 from pydantic import ValidationError
 
 from modsat_core.bench_control import bench_control
