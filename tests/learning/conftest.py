@@ -5,7 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
+from modsat_core.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
 from modsat_core.spec import JobSpec
+from modsat_core.train import train
 
 
 @pytest.fixture(autouse=True)
@@ -57,3 +59,12 @@ def tiny_spec(**over) -> JobSpec:
 @pytest.fixture
 def tiny():
     return tiny_spec
+
+
+def first_checkpoint(spec: JobSpec) -> dict:
+    """Train ``spec`` until its first checkpoint, stop there, and return that checkpoint as a
+    resumed run reads it (through its bytes): ``train(spec, checkpoint=...)`` continues it."""
+    ckpts: list[bytes] = []
+    first = train(spec, on_checkpoint=lambda ck: ckpts.append(checkpoint_to_bytes(ck)), should_stop=lambda: bool(ckpts))
+    assert first.stopped
+    return checkpoint_from_bytes(ckpts[-1])

@@ -10,7 +10,6 @@ import torch
 from pydantic import ValidationError
 
 from modsat_core.bench_control import bench_control
-from modsat_core.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
 from modsat_core.codesign_env import relabel_rows
 from modsat_core.envs import reference_design
 from modsat_core.mission import draw_episode, relabel
@@ -19,7 +18,7 @@ from modsat_core.slew import Design, SlewSim
 from modsat_core.td3_run import TD3Run
 from modsat_core.train import train
 
-from .conftest import tiny_spec
+from .conftest import first_checkpoint, tiny_spec
 
 
 def _spec(episode_steps: int = 40, **over):
@@ -107,9 +106,6 @@ def test_runs_with_the_curriculum_resume_exactly_and_bench_control_uses_it():
     spec = _spec(training__hold_cone_start_deg=180.0, design__repair=True)
     full = train(spec)
     assert full.curve != train(_spec(design__repair=True)).curve  # the replayed rewards changed
-    ckpts: list[bytes] = []
-    first = train(spec, on_checkpoint=lambda ck: ckpts.append(checkpoint_to_bytes(ck)), should_stop=lambda: bool(ckpts))
-    assert first.stopped
-    assert train(spec, checkpoint=checkpoint_from_bytes(ckpts[-1])).curve == full.curve
+    assert train(spec, checkpoint=first_checkpoint(spec)).curve == full.curve
     with_cone = bench_control(_spec(training__total_env_steps=400, training__hold_cone_start_deg=180.0), eval_every=400)
     assert with_cone["curve"] != bench_control(_spec(training__total_env_steps=400), eval_every=400)["curve"]

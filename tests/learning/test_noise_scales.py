@@ -6,11 +6,10 @@ import math
 
 import torch
 
-from modsat_core.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
 from modsat_core.td3_run import TD3Run
 from modsat_core.train import train
 
-from .conftest import tiny_spec
+from .conftest import first_checkpoint, tiny_spec
 
 
 def test_stds_are_log_uniform_between_the_floor_and_the_scheduled_noise():
@@ -60,13 +59,6 @@ def test_without_a_floor_the_run_draws_nothing_extra():
 def test_resume_keeps_every_episode_s_std():
     spec = tiny_spec(training__exploration_noise_min=0.001, design__repair=True)
     full = train(spec)
-    ckpts: list[bytes] = []
-    first = train(
-        spec,
-        on_checkpoint=lambda ck: ckpts.append(checkpoint_to_bytes(ck)),
-        should_stop=lambda: bool(ckpts),
-    )
-    assert first.stopped
-    ck = checkpoint_from_bytes(ckpts[-1])
+    ck = first_checkpoint(spec)
     assert ck["run"]["noise_u"].shape == (spec.training.num_envs,)
     assert train(spec, checkpoint=ck).curve == full.curve

@@ -9,11 +9,10 @@ import pytest
 from pydantic import ValidationError
 
 from modsat_core.bench_control import bench_control
-from modsat_core.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
 from modsat_core.td3_run import TD3Run
 from modsat_core.train import train
 
-from .conftest import tiny_spec
+from .conftest import first_checkpoint, tiny_spec
 
 
 def _lrs(run: TD3Run) -> tuple[float, float]:
@@ -58,10 +57,7 @@ def test_a_run_s_updates_use_the_scheduled_rates():
 def test_resume_reproduces_the_uninterrupted_run():
     spec = tiny_spec(training__lr_final_fraction=0.2, design__repair=True)
     full = train(spec)
-    ckpts: list[bytes] = []
-    first = train(spec, on_checkpoint=lambda ck: ckpts.append(checkpoint_to_bytes(ck)), should_stop=lambda: bool(ckpts))
-    assert first.stopped
-    assert train(spec, checkpoint=checkpoint_from_bytes(ckpts[-1])).curve == full.curve
+    assert train(spec, checkpoint=first_checkpoint(spec)).curve == full.curve
 
 
 def test_bench_control_follows_the_schedule_and_can_fly_the_target_actor():
