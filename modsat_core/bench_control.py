@@ -53,6 +53,12 @@ def flat_state(sim: SlewSim) -> Tensor:
     return torch.cat((glob, h), dim=-1).float()
 
 
+def flat_attitude(o: Tensor, rate_limit_rad_s: float) -> tuple[Tensor, Tensor]:
+    """The error quaternion and body rate a flat state holds (`control_globals` puts q_BT in its
+    first 4 numbers and omega / rate limit in its 9th to 11th)."""
+    return o[:, :4], o[:, 8:11] * rate_limit_rad_s
+
+
 class _Controller:
     def __init__(self, actor: torch.nn.Module, K: int):
         self.actor, self.K = actor, K
@@ -153,10 +159,9 @@ def bench_control(
                 credit -= 1.0
                 agent.schedule(t, steps)
                 b = buf.sample(t.batch_size, gen)
-                if t.hold_cone_start_deg is not None:  # flat state: q_BT at 0:4, omega / rate limit at 8:11
-                    cone = t.hold_cone_deg(steps, m.tolerance_deg)
-                    omega = b["o2"][:, 8:11] * m.rate_limit_rad_s
-                    b["r"] = relabel(b["r"], b["o"][:, :4], b["o2"][:, :4], omega, b["d"], m, cone)
+                if t.hold_cone_start_deg is not None:
+                    (q, _), (q2, omega2) = (flat_attitude(b[k], m.rate_limit_rad_s) for k in ("o", "o2"))
+                    b["r"] = relabel(b["r"], q, q2, omega2, b["d"], m, t.hold_cone_deg(steps, m.tolerance_deg))
                 agent.update(b["o"], b["a"], b["r"], b["o2"], b["d"], gen)
         if steps >= next_eval:
             evaluate()

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import torch
 
-from modsat_core.bench_control import flat_state
+from modsat_core.bench_control import flat_attitude, flat_state
 from modsat_core.envs import reference_design
 from modsat_core.features import N_COMMON, N_DESIGN, PhysState, cell_observation
 from modsat_core.mission import draw_episode
@@ -33,6 +33,10 @@ def test_flat_state_is_what_an_actuator_cell_sees(tiny):
         torch.as_tensor(grid).long().expand(3, 2, 2, 2), torch.full((3,), 3), 3, phys, spec.mission.rate_limit_rad_s
     )
     torch.testing.assert_close(flat_state(sim), obs.x[:, cell, N_COMMON + N_DESIGN :])
+    # and the attitude the tolerance curriculum recomputes rewards from is read back from it
+    q, omega = flat_attitude(flat_state(sim), spec.mission.rate_limit_rad_s)
+    torch.testing.assert_close(q, sim.error_quaternion().float())
+    torch.testing.assert_close(omega, sim.state.omega_B.float())
 
 
 def test_cli_bench_control_trains_evaluates_and_compares_with_pd(tiny, tmp_path, capsys):
