@@ -88,7 +88,8 @@ def bench_control(
     sim.reset(list(range(B)), [draw_episode(r, m) for r in rngs])
     obs_dim, act_dim = flat_state(sim).shape[1], 3 * K
     critic = MLPCritic(obs_dim, act_dim, hidden, t.critic_layer_norm)
-    agent = TD3(MLPActor(obs_dim, act_dim, hidden), critic, TD3Config.from_training(t))
+    actor = MLPActor(obs_dim, act_dim, hidden, mirror_at=0 if t.odd_control else None)
+    agent = TD3(actor, critic, TD3Config.from_training(t))
     buf = ReplayBuffer(
         {
             "o": ((obs_dim,), torch.float32),

@@ -45,6 +45,8 @@ FINER_GAIN = 300.0
 RATE_GAIN = 50.0
 #: Numbers of the satellite's state in the control part (all but the cell's wheel momentum).
 N_CONTROL_GLOBAL = N_CONTROL - 3
+#: Where a cell's control part (the satellite's `control_globals`, then the wheel) starts.
+CONTROL_AT = N_COMMON + N_DESIGN
 
 
 def control_globals(
@@ -76,6 +78,24 @@ def control_globals(
         ),
         dim=-1,
     )
+
+
+def mirror_control(x: Tensor, at: int = CONTROL_AT, n: int = N_CONTROL_GLOBAL) -> Tensor:
+    """``x`` (..., F) with the :func:`control_globals` numbers at ``at:at + n`` (a cell's, by
+    default) mirrored: the
+    features of the same satellite with the error vector q_v and the body rate negated (the
+    inverse error, turning the other way; `training.odd_control`). Everything else is kept.
+
+    q_v, omega and their tanh channels flip; q_w and dq_w/dt (-q_v . omega / 2) do not;
+    dq_v/dt = (q_w omega + q_v x omega) / 2 becomes -dq_v/dt + q_v x omega. The map is its own
+    inverse, and it fixes exactly the states with q_v = 0 and omega = 0: the pointed, still
+    satellite (and the zero features of empty cells and design rows).
+    """
+    g = x[..., at : at + n]
+    v, rate = g[..., 1:4], g[..., 8:11]  # q_v and omega / rate limit
+    qdot_v = -g[..., 5:8] + 2.0 * torch.cross(v, rate, dim=-1)  # qdot is scaled by 2 / rate limit
+    m = torch.cat((g[..., :1], -v, g[..., 4:5], qdot_v, -g[..., 8:]), dim=-1)
+    return torch.cat((x[..., :at], m, x[..., at + n :]), dim=-1)
 
 
 @dataclass

@@ -7,18 +7,28 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from .networks import mlp
+from .features import mirror_control
+from .layers import mlp
 
 
 class MLPActor(nn.Module):
-    """Deterministic actor for flat observations; actions in [-1, 1]^act_dim."""
+    """Deterministic actor for flat observations; actions in [-1, 1]^act_dim.
 
-    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
+    ``mirror_at`` (optional): the observation holds :func:`~modsat_core.features.control_globals`
+    there, and the actor is made odd under :func:`~modsat_core.features.mirror_control`:
+    ``tanh((net(o) - net(mirror(o))) / 2)``, so the torque of the mirrored state is the negated
+    torque, and exactly zero for a pointed, still satellite (`training.odd_control`).
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int], mirror_at: int | None = None):
         super().__init__()
         self.net = mlp([obs_dim, *hidden, act_dim])
+        self.mirror_at = mirror_at
 
     def forward(self, obs: Tensor) -> Tensor:
-        return torch.tanh(self.net(obs))
+        if self.mirror_at is None:
+            return torch.tanh(self.net(obs))
+        return torch.tanh(0.5 * (self.net(obs) - self.net(mirror_control(obs, self.mirror_at))))
 
     @staticmethod
     def finish(obs: Tensor, action: Tensor) -> Tensor:

@@ -33,7 +33,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from .features import CellObs
+from .features import CellObs, mirror_control
+from .layers import effort, finish, imitation, masked_mean, mlp
 
 NETWORKS: tuple[str, ...] = ("per-module", "set")
 #: Width of the set network's per-cell encoder and heads.
@@ -42,59 +43,29 @@ SET_CELL_WIDTH = 32
 DESIGN_STRUCTURE_BIAS = 1.0
 
 
-def mlp(sizes: list[int], layer_norm: bool = False) -> nn.Sequential:
-    """Linear layers with ReLU between them (none after the last); ``layer_norm`` puts a
-    LayerNorm before each ReLU (`training.critic_layer_norm`)."""
-    layers: list[nn.Module] = []
-    for i in range(len(sizes) - 1):
-        layers.append(nn.Linear(sizes[i], sizes[i + 1]))
-        if i < len(sizes) - 2:
-            layers += [nn.LayerNorm(sizes[i + 1]), nn.ReLU()] if layer_norm else [nn.ReLU()]
-    return nn.Sequential(*layers)
-
-
-def finish(obs: CellObs, action: Tensor) -> Tensor:
-    """Clamp a (perturbed) per-cell action to [-1, 1] and zero the cells that do not act."""
-    return action.clamp(-1.0, 1.0) * obs.act_mask.unsqueeze(-1)
-
-
-def effort(obs: CellObs, action: Tensor) -> Tensor:
-    """(B,) sum of the squared torque commands of a flying row's acting cells; 0 on design rows
-    (their outputs are type choices, not torques). The actor's penalty of `training.action_l2`."""
-    return action.square().sum((1, 2)) * (~obs.design).to(action.dtype)
-
-
-def imitation(obs: CellObs, action: Tensor, behaviour: Tensor) -> tuple[Tensor, Tensor]:
-    """(B,) squared distance between a design row's actions and the replay's, summed over the
-    three values and averaged over the acting cells, 0 on flying rows; and (B,) bool, the
-    design rows. The actor's behaviour-cloning term of `training.design_bc`."""
-    gap = (action - behaviour).square().sum(-1)
-    mask = obs.act_mask.to(gap.dtype)
-    return (gap * mask).sum(1) / mask.sum(1).clamp(min=1.0) * obs.design.to(gap.dtype), obs.design
-
-
-def masked_mean(t: Tensor, mask: Tensor) -> Tensor:
-    """Mean of (B, C, k) over the cells where ``mask`` (B, C) is true (zeros where none is)."""
-    w = mask.to(t.dtype)
-    w = w / w.sum(dim=1, keepdim=True).clamp(min=1.0)
-    return torch.bmm(w.unsqueeze(1), t).squeeze(1)  # one batched product, not a (B, C, k) temporary
-
-
 # ----------------------------------------------------------------------------- per-module
 
 
 class CellActor(nn.Module):
-    """Shared trunk over per-cell features, a design head and a control head (paper Fig. 6)."""
+    """Shared trunk over per-cell features, a design head and a control head (paper Fig. 6).
 
-    def __init__(self, n_features: int, hidden: list[int]):
+    ``odd_control``: the control head's output is made odd under :func:`mirror_control`
+    (`training.odd_control`): half the difference of its values on the features and on the
+    mirrored features, before the tanh."""
+
+    def __init__(self, n_features: int, hidden: list[int], odd_control: bool = False):
         super().__init__()
         self.trunk = nn.Sequential(mlp([n_features, *hidden]), nn.ReLU())
         self.design_head = nn.Linear(hidden[-1], 3)
         self.control_head = nn.Linear(hidden[-1], 3)
+        self.odd_control = odd_control
 
     def act(self, x: Tensor, act_mask: Tensor, value_mask: Tensor, design: Tensor) -> Tensor:
         z = self.trunk(x)
-        raw = torch.where(design.reshape(-1, 1, 1), self.design_head(z), self.control_head(z))
+        control = self.control_head(z)
+        if self.odd_control:
+            control = 0.5 * (control - self.control_head(self.trunk(mirror_control(x))))
+        raw = torch.where(design.reshape(-1, 1, 1), self.design_head(z), control)
         return torch.tanh(raw) * act_mask.unsqueeze(-1).to(raw.dtype)
 
     @torch.jit.unused  # the export compiles ``act``; CellObs is no TorchScript type
@@ -150,22 +121,29 @@ class _CellHead(nn.Module):
 
 
 class _SetActorPhase(nn.Module):
-    """One phase's actor: per-cell encoder, pooling, wide layers, per-cell head on acting cells."""
+    """One phase's actor: per-cell encoder, pooling, wide layers, per-cell head on acting cells.
+    ``odd``: the head's output is made odd under :func:`mirror_control`, as :class:`CellActor`'s."""
 
-    def __init__(self, n_features: int, hidden: list[int], cell_width: int):
+    def __init__(self, n_features: int, hidden: list[int], cell_width: int, odd: bool = False):
         super().__init__()
         self.encoder = nn.Sequential(nn.Linear(n_features, cell_width), nn.ReLU(inplace=True))
         self.wide = nn.Sequential(mlp([cell_width + n_features, *hidden]), nn.ReLU())
         self.head = _CellHead(cell_width, hidden[-1])
+        self.odd = odd
 
-    def forward(self, x: Tensor, act_mask: Tensor, value_mask: Tensor) -> Tensor:
+    def _out(self, x: Tensor, value_mask: Tensor, rows: Tensor, cells: Tensor) -> Tensor:
         enc = self.encoder(x)
         # The satellite-wide features (state, counts, progress) are the same on every
         # occupied cell; their mean over the satellite is them.
         z = self.wide(torch.cat((masked_mean(enc, value_mask), masked_mean(x, value_mask)), dim=-1))
+        return self.head(enc[rows, cells], self.head.sat(z)[rows])
+
+    def forward(self, x: Tensor, act_mask: Tensor, value_mask: Tensor) -> Tensor:
         idx = act_mask.nonzero()
         rows, cells = idx[:, 0], idx[:, 1]
-        out = self.head(enc[rows, cells], self.head.sat(z)[rows])
+        out = self._out(x, value_mask, rows, cells)
+        if self.odd:
+            out = 0.5 * (out - self._out(mirror_control(x), value_mask, rows, cells))
         raw = torch.zeros(x.shape[0], x.shape[1], 3, dtype=x.dtype, device=x.device)
         raw[rows, cells] = torch.tanh(out)
         return raw
@@ -181,10 +159,10 @@ class SetActor(nn.Module):
     while designing, the actuators while flying).
     """
 
-    def __init__(self, n_features: int, hidden: list[int], cell_width: int = SET_CELL_WIDTH):
+    def __init__(self, n_features: int, hidden: list[int], odd_control: bool = False, cell_width: int = SET_CELL_WIDTH):
         super().__init__()
         self.design = _SetActorPhase(n_features, hidden, cell_width)
-        self.control = _SetActorPhase(n_features, hidden, cell_width)
+        self.control = _SetActorPhase(n_features, hidden, cell_width, odd=odd_control)
         # The untrained design head grows structure everywhere (the full cube around the seed
         # actuator), not whatever type its random initialisation favours. Measured: from an
         # empty grid, runs whose first designs were all empty never left them (a one-module
@@ -280,10 +258,11 @@ def _check(network: str) -> None:
         raise ValueError(f"unknown network {network!r}; known: {', '.join(NETWORKS)}")
 
 
-def make_actor(network: str, n_features: int, hidden: list[int]) -> nn.Module:
-    """The co-design actor of ``network`` (``per-module`` or ``set``)."""
+def make_actor(network: str, n_features: int, hidden: list[int], odd_control: bool = False) -> nn.Module:
+    """The co-design actor of ``network`` (``per-module`` or ``set``); ``odd_control``: the
+    control output is odd under :func:`mirror_control` (`training.odd_control`)."""
     _check(network)
-    return _ACTORS[network](n_features, list(hidden))
+    return _ACTORS[network](n_features, list(hidden), odd_control)
 
 
 def make_critic(network: str, n_features: int, hidden: list[int], layer_norm: bool = False) -> nn.Module:

@@ -12,9 +12,8 @@ from torch import Tensor, nn
 
 from .codesign_env import seed_grid
 from .features import (
-    N_COMMON,
+    CONTROL_AT,
     N_CONTROL_GLOBAL,
-    N_DESIGN,
     CellObs,
     PhysState,
     cell_observation,
@@ -100,7 +99,7 @@ class ExportedController(nn.Module):
         self.register_buffer("act_cells", ctrl.act_cells.clone())
         self.register_buffer("act_mask", (ctrl.grid.reshape(-1) == ACTUATOR).unsqueeze(0))
         self.register_buffer("value_mask", (ctrl.grid.reshape(-1) != 0).unsqueeze(0))
-        self.c0 = N_COMMON + N_DESIGN
+        self.c0 = CONTROL_AT
         self.n_glob = N_CONTROL_GLOBAL
         self.rate_limit = spec.mission.rate_limit_rad_s
         self.tau_max = spec.modules.torque_scale_Nm

@@ -20,8 +20,9 @@ POLICY_VERSION = 2
 
 
 def new_actor(spec: JobSpec) -> torch.nn.Module:
-    """The co-design actor of a spec (``training.network``, ``training.hidden_sizes``)."""
-    return make_actor(spec.training.network, N_FEATURES, list(spec.training.hidden_sizes))
+    """The co-design actor of a spec (``training.network``, ``hidden_sizes``, ``odd_control``)."""
+    t = spec.training
+    return make_actor(t.network, N_FEATURES, list(t.hidden_sizes), t.odd_control)
 
 
 def actor_from_state(spec: JobSpec, state: dict) -> torch.nn.Module:

@@ -175,6 +175,17 @@ class Training(_Section):
             "runs the paper's mission needs. false = the paper's critic."
         ),
     )
+    odd_control: bool = Field(
+        False,
+        description=(
+            "Make the control output odd in the attitude error and rates: torque = tanh((g(x) - "
+            "g(Px)) / 2), where P negates the error vector, its rate, the body rate and their fine "
+            "channels and keeps everything else (wheel momentum, design, counts). A pointed, still "
+            "satellite then gets exactly zero torque whatever the weights, so a hold does not have "
+            "to cancel a learned bias to a fraction of a percent of full scale. Design outputs are "
+            "unchanged. false = the paper's actor."
+        ),
+    )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
     policy_noise_final: float | None = Field(
         None,

@@ -22,7 +22,8 @@ from .checkpoint import (
 )
 from .codesign_env import CoDesignEnv, Compact, observe_compact, relabel_rows
 from .features import N_FEATURES, CellObs
-from .networks import finish, make_critic
+from .layers import finish
+from .networks import make_critic
 from .policy import design_with
 from .policy_file import actor_from_state, new_actor
 from .reports import curve_point

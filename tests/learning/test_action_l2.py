@@ -7,7 +7,7 @@ from torch import Tensor, nn
 
 from modsat_core.features import CellObs
 from modsat_core.flat_networks import MLPActor
-from modsat_core.networks import effort
+from modsat_core.layers import effort
 from modsat_core.spec import Training
 from modsat_core.td3 import TD3, TD3Config
 

@@ -28,13 +28,14 @@ assert "modsat_core" not in sys.modules
 """
 
 
+@pytest.mark.parametrize("odd_control", [False, True])
 @pytest.mark.parametrize("network", NETWORKS)
-def test_export_matches_in_process_policy(tmp_path, network):
+def test_export_matches_in_process_policy(tmp_path, network, odd_control):
     spec = tiny_spec(design={"grid_size": 3})
     grid = np.ones((3, 3, 3), dtype=np.int64)
     grid[0, 1, 1] = grid[1, 1, 1] = grid[2, 0, 2] = 2
     torch.manual_seed(0)
-    actor = make_actor(network, N_FEATURES, [32, 32]).eval()
+    actor = make_actor(network, N_FEATURES, [32, 32], odd_control).eval()
     # A state with rates and wheel momentum: fly a few random steps first.
     sim = SlewSim.from_designs([Design.from_grid(grid, spec.modules)] * 16, spec.mission, spec.modules)
     sim.reset(list(range(16)), [draw_episode(r, spec.mission) for r in episode_rngs(1, 16)])
