@@ -82,9 +82,9 @@ def control_globals(
 
 def mirror_control(x: Tensor, at: int = CONTROL_AT, n: int = N_CONTROL_GLOBAL) -> Tensor:
     """``x`` (..., F) with the :func:`control_globals` numbers at ``at:at + n`` (a cell's, by
-    default) mirrored: the
-    features of the same satellite with the error vector q_v and the body rate negated (the
-    inverse error, turning the other way; `training.odd_control`). Everything else is kept.
+    default) mirrored: the features of the same satellite with the error vector q_v and the
+    body rate negated (the inverse error, turning the other way; `training.odd_control`).
+    Everything else is kept.
 
     q_v, omega and their tanh channels flip; q_w and dq_w/dt (-q_v . omega / 2) do not;
     dq_v/dt = (q_w omega + q_v x omega) / 2 becomes -dq_v/dt + q_v x omega. The map is its own

@@ -22,7 +22,7 @@ per-cell observations of :mod:`modsat_core.features`:
     5x5x5 within the cost aim (docs/benchmarks.md).
 
 Plain MLP pairs for flat observations (gymnasium tasks, ``bench control``) are in
-:mod:`modsat_core.flat_networks`.
+:mod:`modsat_core.flat_networks`; the layers both use in :mod:`modsat_core.layers`.
 
 Every actor has ``act(x, act_mask, value_mask, design)`` over plain tensors (TorchScript
 can compile it, which the standalone export uses) and ``forward(obs: CellObs)``.
