@@ -179,8 +179,8 @@ class Training(_Section):
         False,
         description=(
             "Make the control output odd in the attitude error and rates: torque = tanh((g(x) - "
-            "g(Px)) / 2), where P negates the error vector, its rate, the body rate and their fine "
-            "channels and keeps everything else (wheel momentum, design, counts). A pointed, still "
+            "g(Px)) / 2), where P is the physical mirror of the state (the inverse error, the opposite "
+            "rate) and keeps everything else (wheel momentum, design, counts). A pointed, still "
             "satellite then gets exactly zero torque whatever the weights, so a hold does not have "
             "to cancel a learned bias to a fraction of a percent of full scale. Design outputs are "
             "unchanged. false = the paper's actor."
