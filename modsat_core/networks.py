@@ -63,7 +63,7 @@ class CellActor(nn.Module):
     def act(self, x: Tensor, act_mask: Tensor, value_mask: Tensor, design: Tensor) -> Tensor:
         z = self.trunk(x)
         control = self.control_head(z)
-        if self.odd_control:
+        if self.odd_control and not bool(design.all()):  # design rows keep their design head's output
             control = 0.5 * (control - self.control_head(self.trunk(mirror_control(x))))
         raw = torch.where(design.reshape(-1, 1, 1), self.design_head(z), control)
         return torch.tanh(raw) * act_mask.unsqueeze(-1).to(raw.dtype)
