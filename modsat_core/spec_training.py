@@ -145,6 +145,15 @@ class Training(_Section):
             "the one it has. Once reached, the design learns to the end of the run. null = no gate."
         ),
     )
+    design_exploration_after_release: bool = Field(
+        False,
+        description=(
+            "If true, designs are explored (cell swaps and action noise in the design phase) only once "
+            "the actor's design layers learn (`design_learning_starts`, `design_learning_after_success`): "
+            "until then every flight is on the policy's own design, so the controller learns to fly one "
+            "satellite before it meets others. false = explored from the start."
+        ),
+    )
     design_bc: float = Field(
         0.0,
         ge=0.0,

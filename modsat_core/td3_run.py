@@ -102,7 +102,10 @@ class TD3Run:
     def _explored_designs(self, obs: CellObs) -> torch.Tensor:
         """(B,) bool: the episodes whose design phase is explored (`design_exploration_episodes`).
 
-        Drawn once per episode, when its design phase starts."""
+        Drawn once per episode, when its design phase starts; none while the design is held
+        with `design_exploration_after_release`."""
+        if self.t.design_exploration_after_release and not self.design_released():
+            return torch.zeros_like(obs.design)
         q = self.t.design_exploration_episodes
         if q >= 1.0:
             return torch.ones_like(obs.design)

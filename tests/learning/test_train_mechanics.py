@@ -154,16 +154,18 @@ def test_a_policy_file_from_before_the_network_choice_is_refused_with_a_reason()
 
 def test_unexplored_episodes_grow_the_policy_s_own_design():
     """`design_exploration_episodes`: an episode drawn as unexplored grows exactly the design
-    the deterministic actor grows (no swaps, no noise); explored ones differ."""
+    the deterministic actor grows (no swaps, no noise); explored ones differ. So do all
+    episodes while the design is held with `design_exploration_after_release`."""
     from modsat_core.policy import design_with
     from modsat_core.td3_run import TD3Run
 
-    def grown(share: float) -> tuple[list, np.ndarray]:
+    def grown(share: float, **kw) -> tuple[list, np.ndarray]:
         spec = tiny_spec(
             training__learning_starts=0,
             training__design_exploration=0.5,
             training__design_exploration_episodes=share,
             design__repair=True,
+            **kw,
         )
         run = TD3Run(spec)
         for _ in range(spec.design.design_steps):
@@ -173,6 +175,13 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
     grids, own = grown(0.0)
     assert all(np.array_equal(g, own) for g in grids)
     grids, own = grown(1.0)
+    assert sum(not np.array_equal(g, own) for g in grids) >= len(grids) // 2
+    # `design_exploration_after_release`: nothing is explored while the design is held, and
+    # every share is explored again once it is released.
+    held = {"training__design_exploration_after_release": True, "training__design_learning_starts": 10**6}
+    grids, own = grown(1.0, **held)
+    assert all(np.array_equal(g, own) for g in grids)
+    grids, own = grown(1.0, training__design_exploration_after_release=True)
     assert sum(not np.array_equal(g, own) for g in grids) >= len(grids) // 2
 
 
