@@ -1,19 +1,17 @@
-"""Co-design lands the slew: a CI variant of `quick`, success itself asserted.
+"""Co-design lands the slew: `quick` as shipped, success itself asserted.
 
-`quick` as shipped (the set network, the CPU recipe, the design held for the first 20k of
-60k env steps) lands seeds 0, 1 and 2 (88-100 % of 100 slews, docs/learning.md) but takes
-about an hour on one core: more than CI can give. This variant makes one update per two env
-steps (29k updates instead of 58k), everything else as shipped, seed 0: run e35 of
-docs/learning.md, "Eighth round" (100 % of the final 32 slews, 97 % of 100; 37 min on the
-busy 2-core machine). It is a regression check of that measured run, not a claim about
-every seed: seed 1 of this variant does not land (e37), which is why the preset keeps one
-update per step.
+`quick` (the set network, `cpu-3x3x3`'s recipe, 15k env steps, seed 0) is run q2s0 of
+docs/learning.md, "Eighteenth round": 28 of its final 32 slews (1 deg and 0.01 rad/s at the
+end of 120 steps) landed, 91 of 100 with `modsat eval`, after 9.4 min of training on one core.
+It is a regression check of that measured run, not a claim about every seed: seeds 1 and 2
+land 53 % and 0 % of 32 in this budget, and a machine with other floating point (another
+SIMD width) is another draw of the same recipe.
 
-Its final evaluation (32 seeded slews, 1 deg and 0.01 rad/s at the end of 120 steps) must
-land at least `MIN_SUCCESS` of them. Measured against on the same slews: the same network
-untrained, flying its own design, and 8 random valid designs flown by that untrained
-controller (`modsat_core.baselines.untrained_baselines`), which land none (every slew
-breaks the rate limit); and the PD baseline on the designed satellite, which lands all.
+Its final evaluation (32 seeded slews) must land at least `MIN_SUCCESS` of them. Measured
+against on the same slews: the same network untrained, flying its own design, and 8 random
+valid designs flown by that untrained controller (`modsat_core.baselines.untrained_baselines`),
+which land none (every slew breaks the rate limit or ends far off); and the PD baseline on the
+designed satellite, which lands all.
 """
 
 from __future__ import annotations
@@ -25,17 +23,18 @@ from modsat_core.presets import get_preset
 from modsat_core.spec import parse_spec
 from modsat_core.train import train
 
-pytestmark = pytest.mark.slow  # trains co-design for 60k env steps (tens of minutes)
+pytestmark = pytest.mark.slow  # trains co-design for 15k env steps (about 10 minutes)
 
-#: Share of the final 32 slews that must land. The baselines land none; 24 of 32 by chance
-#: would need a controller that points and holds still, which only training gives.
-MIN_SUCCESS = 0.75
+#: Share of the final 32 slews that must land (the measured run: 28). The baselines land none;
+#: 16 of 32 by chance would need a controller that points and holds still, which only training
+#: gives. Half, not three quarters: the run's curve swings (47, 6, 47, 88 % at 7.5k-15k), so a
+#: draw on other floating point lands less than the measured one.
+MIN_SUCCESS = 0.5
 
 
-def test_codesign_on_a_ci_variant_of_quick_lands_most_slews():
+def test_codesign_on_quick_lands_the_slew():
     d = get_preset("quick").model_dump(mode="json")
     assert d["seed"] == 0
-    d["training"].update(train_frequency=2)
     spec = parse_spec(d)
     res = train(spec)
     trained = res.summary["policy"]

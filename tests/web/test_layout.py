@@ -89,7 +89,7 @@ def test_bad_spec_shows_the_field_error_next_to_the_form(crowded, new_page):
     before = crowded.client.get("/api/jobs").json()["total"]
 
     # A value out of range, typed into the JSON editor, and an unknown field.
-    text = page.input_value("#overrides").replace('"total_env_steps": 60000', '"total_env_steps": 0')
+    text = page.input_value("#overrides").replace('"total_env_steps": 15000', '"total_env_steps": 0')
     text = text.replace('"seed": 0,', '"seed": 0, "colour": "red",')
     page.fill("#overrides", text)
     assert page.input_value("#f-training-total_env_steps") == "0", "the editor updates the form fields"
