@@ -146,8 +146,8 @@ def trained_run(tmp_path_factory, verify):
         eval_every_steps=10**6,
         eval_episodes=1,
         checkpoint_every_steps=10**6,
-        # Neither the action penalty nor the odd output of `quick`'s recipe: both shrink the
-        # barely trained policy's torques towards zero, and then the satellite hardly turns.
+        # Without the action penalty and the odd output of `quick`'s recipe: with them the
+        # barely trained policy's torques stayed near zero (peak rate 0.0009 rad/s).
         action_l2=0.0,
         odd_control=False,
     )
