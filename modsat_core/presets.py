@@ -82,7 +82,7 @@ PRESETS: dict[str, JobSpec] = {
     # one core. `cpu-3x3x3`'s recipe (the action penalty, the control output odd in the error and
     # rates, the design held until the curve lands 75 % and no design explored until then, TD3+BC on
     # the design head) over 15k env steps: seed 0 lands 91 of 100 slews at 1 deg after 9.4 min of
-    # training (q2s0, docs/learning.md "Eighteenth round"); seeds 1 and 2 land 53 % and 0 % of 32 in
+    # training (q2s0, docs/learning.md "Eighteenth round"); seeds 1 and 2 land 61 % and 0 % of 100 in
     # that budget (still learning the slew). The former recipe (60k steps, the design held 20k)
     # landed seeds 0-2 at 88-100 % in about an hour.
     "quick": JobSpec.model_validate(

@@ -4,7 +4,7 @@
 docs/learning.md, "Eighteenth round": 28 of its final 32 slews (1 deg and 0.01 rad/s at the
 end of 120 steps) landed, 91 of 100 with `modsat eval`, after 9.4 min of training on one core.
 It is a regression check of that measured run, not a claim about every seed: seeds 1 and 2
-land 53 % and 0 % of 32 in this budget, and a machine with other floating point (another
+land 61 % and 0 % of 100 in this budget, and a machine with other floating point (another
 SIMD width) is another draw of the same recipe.
 
 Its final evaluation (32 seeded slews) must land at least `MIN_SUCCESS` of them. Measured
