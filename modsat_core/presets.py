@@ -51,6 +51,17 @@ _CPU_TRAINING = {
     "design_exploration_episodes": 0.25,
     "device": "cpu",
 }
+# What lands the hold in co-design, on top of it (docs/learning.md, "Twelfth" to "Eighteenth
+# round"; each preset's comment has the runs): the actor's action penalty, a control output odd
+# in the error and rates, the design held until the curve lands 75 % of its slews with no design
+# explored until then, and TD3+BC on the design head once it learns.
+_CODESIGN_HOLD = {
+    "action_l2": 10.0,
+    "design_learning_after_success": 0.75,
+    "odd_control": True,
+    "design_exploration_after_release": True,
+    "design_bc": 0.4,
+}
 _HOLD_REWARD = {
     **_NO_EARLY_EXIT,
     "no_progress_penalty_in_tolerance": False,
@@ -101,6 +112,7 @@ PRESETS: dict[str, JobSpec] = {
             },
             "training": {
                 **_CPU_TRAINING,
+                **_CODESIGN_HOLD,
                 "total_env_steps": 15_000,
                 "num_envs": 16,
                 "buffer_size": 100_000,
@@ -108,12 +120,7 @@ PRESETS: dict[str, JobSpec] = {
                 "eval_every_steps": 2_500,
                 "eval_episodes": 32,
                 "checkpoint_every_steps": 5_000,
-                "action_l2": 10.0,
                 "design_learning_starts": 10_000,
-                "design_learning_after_success": 0.75,
-                "odd_control": True,
-                "design_exploration_after_release": True,
-                "design_bc": 0.4,
             },
             "evaluation": {"episodes": 32},
         }
@@ -138,6 +145,7 @@ PRESETS: dict[str, JobSpec] = {
             "mission": {"reward": _HOLD_REWARD},
             "training": {
                 **_CPU_TRAINING,
+                **_CODESIGN_HOLD,
                 "total_env_steps": 100_000,
                 "num_envs": 16,
                 "buffer_size": 200_000,
@@ -145,12 +153,7 @@ PRESETS: dict[str, JobSpec] = {
                 "eval_every_steps": 10_000,
                 "eval_episodes": 32,
                 "checkpoint_every_steps": 20_000,
-                "action_l2": 10.0,
                 "design_learning_starts": 30_000,
-                "design_learning_after_success": 0.75,
-                "odd_control": True,
-                "design_exploration_after_release": True,
-                "design_bc": 0.4,
             },
         }
     ),

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from modsat_core.presets import get_preset
 from tests.worker.helpers import wait_for
 
 from .conftest import (
@@ -95,7 +96,8 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     page.goto(service.base + "/")
     open_submit_form(page)
     assert page.input_value("#preset") == "quick"
-    assert '"total_env_steps": 15000' in page.input_value("#overrides"), "the editor holds the preset"
+    budget = get_preset("quick").training.total_env_steps
+    assert f'"total_env_steps": {budget}' in page.input_value("#overrides"), "the editor holds the preset"
     page.fill("#f-name", "rl-ci")
     page.fill("#f-training-total_env_steps", "300")  # form fields write into the JSON editor
     page.fill("#f-evaluation-episodes", "8")

@@ -8,6 +8,8 @@ import time
 
 import pytest
 
+from modsat_core.presets import get_preset
+
 from .conftest import DESKTOP, PHONE, Serve, open_submit_form, screenshot_dir
 
 N_JOBS = 200
@@ -89,7 +91,8 @@ def test_bad_spec_shows_the_field_error_next_to_the_form(crowded, new_page):
     before = crowded.client.get("/api/jobs").json()["total"]
 
     # A value out of range, typed into the JSON editor, and an unknown field.
-    text = page.input_value("#overrides").replace('"total_env_steps": 15000', '"total_env_steps": 0')
+    budget = get_preset("quick").training.total_env_steps
+    text = page.input_value("#overrides").replace(f'"total_env_steps": {budget}', '"total_env_steps": 0')
     text = text.replace('"seed": 0,', '"seed": 0, "colour": "red",')
     page.fill("#overrides", text)
     assert page.input_value("#f-training-total_env_steps") == "0", "the editor updates the form fields"
