@@ -559,9 +559,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_service_commands(sub) -> None:
     """`serve` and `worker` live with the service (server/, worker/), in the same distribution."""
-    from .cli_service import add_commands
+    from . import cli_service, cli_study
 
-    add_commands(sub)
+    cli_service.add_commands(sub)
+    cli_study.add_commands(sub)
 
 
 def main(argv: list[str] | None = None) -> int:
