@@ -28,6 +28,8 @@ from worker.store import JobStore
 
 from .deps import StoreDep
 from .routes_jobs import router as jobs_router
+from .routes_studies import StudySubmission
+from .routes_studies import router as studies_router
 from .schemas import Health, PresetInfo, PresetSubmission
 from .security import CrossSiteGuard
 from .settings import ServerSettings
@@ -195,6 +197,7 @@ def _openapi(app: FastAPI, token: bool):
         comps.update(spec_schema.pop("$defs", {}))
         comps["JobSpec"] = spec_schema
         comps["PresetSubmission"] = PresetSubmission.model_json_schema(ref_template="#/components/schemas/{model}")
+        comps["StudySubmission"] = StudySubmission.model_json_schema(ref_template="#/components/schemas/{model}")
         if not token:  # an open server: no operation needs the bearer token, so none declares it
             schema["components"].pop("securitySchemes", None)
             for ops in schema.get("paths", {}).values():
@@ -250,6 +253,7 @@ def create_app(
         app.state.store = store
     _install_error_handlers(app)
     app.include_router(jobs_router)
+    app.include_router(studies_router)
     app.include_router(_misc_router())
     app.include_router(viewer_router())
     app.include_router(_api_not_found())

@@ -17,6 +17,7 @@ from sqlalchemy import (
     BigInteger,
     Boolean,
     Column,
+    Connection,
     Double,
     Engine,
     ForeignKey,
@@ -29,6 +30,7 @@ from sqlalchemy import (
     Text,
     create_engine,
     event,
+    insert,
 )
 from sqlalchemy.engine import make_url
 from sqlalchemy.ext.compiler import compiles
@@ -117,6 +119,28 @@ artifacts = Table(
     Column("data", LargeBinary, nullable=False),
 )
 
+# A study: one spec run over several seeds and algorithms, each a job (POST /api/studies).
+studies = Table(
+    "modsat_studies",
+    metadata,
+    Column("id", _Id, primary_key=True, autoincrement=True),
+    Column("name", String(200)),
+    Column("spec", Text, nullable=False),  # JobSpec JSON; each job has its own seed and algorithm
+    Column("seeds", Text, nullable=False),  # JSON list of ints
+    Column("algorithms", Text, nullable=False),  # JSON list of str
+    Column("created_at", Double, nullable=False),
+)
+
+study_jobs = Table(
+    "modsat_study_jobs",
+    metadata,
+    Column("study_id", _Id, ForeignKey("modsat_studies.id", ondelete="CASCADE"), primary_key=True),
+    Column("job_id", _Id, ForeignKey("modsat_jobs.id", ondelete="CASCADE"), primary_key=True),
+    Column("algorithm", String(32), nullable=False),
+    Column("seed", BigInteger, nullable=False),
+)
+Index("ix_modsat_study_jobs_job", study_jobs.c.job_id)
+
 workers = Table(
     "modsat_workers",
     metadata,
@@ -147,6 +171,35 @@ def _db_now_sqlite(element, compiler, **kw):
 @compiles(db_now, "postgresql")
 def _db_now_postgresql(element, compiler, **kw):
     return "CAST(EXTRACT(EPOCH FROM clock_timestamp()) AS DOUBLE PRECISION)"
+
+
+def insert_job(
+    conn: Connection, spec_json: str, name: str | None, algorithm: str, total: int, max_attempts: int
+) -> int:
+    """Insert one queued job inside the caller's write transaction; returns its id."""
+    now = db_now()
+    return int(
+        conn.execute(
+            insert(jobs)
+            .values(
+                name=name,
+                algorithm=algorithm,
+                spec=spec_json,
+                status="queued",
+                created_at=now,
+                updated_at=now,
+                attempt=0,
+                failures=0,
+                max_attempts=max_attempts,
+                cancel_requested=False,
+                last_seq=0,
+                env_steps=0,
+                total_env_steps=total,
+                run_seconds=0.0,
+            )
+            .returning(jobs.c.id)
+        ).scalar_one()
+    )
 
 
 def normalize_url(url: str) -> str:

@@ -47,13 +47,16 @@ from .db import (
     artifacts,
     attempts,
     db_now,
+    insert_job,
     jobs,
     make_engine,
     metadata,
     metrics,
+    study_jobs,
     workers,
 )
 from .jsonsafe import to_json
+from .study_store import StudyQueries
 
 #: A job id outside this range cannot exist (and would overflow a BIGINT bind parameter).
 MAX_ID = 2**63 - 1
@@ -105,8 +108,8 @@ def _fence(c: Claim):
     return and_(jobs.c.id == c.job_id, jobs.c.attempt == c.attempt, jobs.c.status == "running")
 
 
-class JobStore:
-    """Jobs, attempts, metrics, artefacts and workers in one SQL database."""
+class JobStore(StudyQueries):
+    """Jobs, attempts, metrics, artefacts, workers and studies in one SQL database."""
 
     def __init__(self, url: str, *, busy_timeout_s: float = 30.0):
         self.engine = make_engine(url, busy_timeout_s=busy_timeout_s)
@@ -161,30 +164,8 @@ class JobStore:
         self, spec_json: str, *, name: str | None, algorithm: str, total_env_steps: int, max_attempts: int
     ) -> int:
         """Queue a job; returns its id."""
-        now = db_now()
         with self._write() as conn:
-            return int(
-                conn.execute(
-                    insert(jobs)
-                    .values(
-                        name=name,
-                        algorithm=algorithm,
-                        spec=spec_json,
-                        status="queued",
-                        created_at=now,
-                        updated_at=now,
-                        attempt=0,
-                        failures=0,
-                        max_attempts=max_attempts,
-                        cancel_requested=False,
-                        last_seq=0,
-                        env_steps=0,
-                        total_env_steps=total_env_steps,
-                        run_seconds=0.0,
-                    )
-                    .returning(jobs.c.id)
-                ).scalar_one()
-            )
+            return insert_job(conn, spec_json, name, algorithm, total_env_steps, max_attempts)
 
     def get_job(self, job_id: int) -> dict[str, Any] | None:
         if not _valid_id(job_id):
@@ -314,7 +295,7 @@ class JobStore:
             if status is None or status == "running":
                 return status
             # Children first and explicitly: SQLite enforces ON DELETE CASCADE only with a pragma.
-            for table in (artifacts, metrics, attempts):
+            for table in (artifacts, metrics, attempts, study_jobs):
                 conn.execute(delete(table).where(table.c.job_id == job_id))
             conn.execute(delete(jobs).where(jobs.c.id == job_id))
         return "deleted"
