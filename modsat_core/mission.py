@@ -92,7 +92,8 @@ def reward(
     tolerance cone only, unless ``no_progress_penalty_in_tolerance``), plus
     ``in_tolerance_bonus`` while phi <= tolerance (and, with ``bonus_needs_settled``, the rate
     <= ``rate_tolerance_rad_s``), plus ``settle_bonus * exp(-|omega| / settle_rate_scale_rad_s)`` while
-    phi <= tolerance; a rate above the limit ends the episode
+    phi <= tolerance, minus ``rate_margin_penalty`` times how far the rate is into the margin below
+    the limit (from ``rate_margin_fraction`` of it); a rate above the limit ends the episode
     with ``-safety_penalty`` (minus ``safety_penalty_per_remaining_step`` for each of the
     ``steps_left`` control steps it had left). ``cone_rad``: the cone of the hold terms in place
     of the tolerance (a tolerance curriculum, `training.hold_cone_start_deg`). Returns (reward,
@@ -110,6 +111,10 @@ def reward(
     rew = rew + r.in_tolerance_bonus * bonus.to(rew.dtype)
     if r.settle_bonus:
         rew = rew + r.settle_bonus * in_tol.to(rew.dtype) * torch.exp(-omega_norm / r.settle_rate_scale_rad_s)
+    if r.rate_margin_penalty:
+        start = r.rate_margin_fraction * mission.rate_limit_rad_s
+        used = ((omega_norm - start) / (mission.rate_limit_rad_s - start)).clamp(min=0.0)
+        rew = rew - r.rate_margin_penalty * used.to(rew.dtype)
     violated = omega_norm > mission.rate_limit_rad_s
     penalty = torch.full_like(rew, -r.safety_penalty)
     if steps_left is not None and r.safety_penalty_per_remaining_step:

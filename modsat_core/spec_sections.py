@@ -160,6 +160,20 @@ class RewardSpec(_Section):
             "the tolerance cone as much as one that holds still in it)."
         ),
     )
+    rate_margin_penalty: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description=(
+            "Subtracted on every step whose body rate is above `rate_margin_fraction` of the rate limit, "
+            "times how far into that margin it is (0 at its start, 1 at the limit): a slope before the "
+            "limit's cliff, so that a policy cruising at the limit learns to keep off it (0: the paper's "
+            "reward, which only ends the episode at the limit)."
+        ),
+    )
+    rate_margin_fraction: float = Field(
+        0.9, gt=0.0, lt=1.0, description="Where `rate_margin_penalty` starts, as a fraction of the rate limit."
+    )
     safety_penalty: float = Field(
         50.0, ge=0.0, le=1e4, description="Subtracted once when the rate limit is exceeded (episode ends)."
     )

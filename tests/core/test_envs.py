@@ -115,6 +115,31 @@ def test_hold_reward_without_in_cone_progress_penalty_and_with_settle_bonus():
     assert info["error_deg"] > 1.0 and r_away < 0.0
 
 
+def test_rate_margin_penalty_slopes_up_to_the_rate_limit():
+    """`rate_margin_penalty`: nothing below `rate_margin_fraction` of the limit, then a linear charge
+    that reaches the whole penalty at the limit; above the limit the episode ends as before."""
+    reward = {"rate_margin_penalty": 2.0, "rate_margin_fraction": 0.8}
+    env = SatelliteSlewEnv(spec={**SHORT, "mission": {**SHORT["mission"], "reward": reward}})
+    plain = SatelliteSlewEnv(spec=SHORT)
+    limit = 0.5  # the default mission's rate limit, rad/s
+    charged = []
+    for share in (0.5, 0.85, 0.95):
+        rs = []
+        for e in (env, plain):
+            e.reset(seed=0, options={"q_TN": [np.cos(0.5), np.sin(0.5), 0, 0], "omega_B": [share * limit, 0.0, 0.0]})
+            _, r, term, *_ = e.step(np.zeros((1, 3), dtype=np.float32))
+            assert not term
+            rs.append(r)
+        charged.append(rs[1] - rs[0])
+    # The rate after the step (no torque: the same rate) sets the charge.
+    assert charged[0] == pytest.approx(0.0, abs=1e-9)
+    assert charged[1] == pytest.approx(2.0 * 0.05 / 0.2, rel=1e-3)
+    assert charged[2] == pytest.approx(2.0 * 0.15 / 0.2, rel=1e-3)
+    env.reset(seed=0, options={"q_TN": [1.0, 0, 0, 0], "omega_B": [1.01 * limit, 0.0, 0.0]})
+    _, r, term, *_ = env.step(np.zeros((1, 3), dtype=np.float32))
+    assert term and r == -50.0
+
+
 def test_invalid_design_is_refused():
     with pytest.raises(ValueError, match="no actuator"):
         SatelliteSlewEnv(design=np.ones((3, 3, 3), dtype=int))
