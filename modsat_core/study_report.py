@@ -15,6 +15,7 @@ Torch-free: it reads ``spec.json``, ``curve.json``, ``design.json`` and ``evalua
 from __future__ import annotations
 
 import io
+import json
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -103,8 +104,7 @@ def symmetry(design: DesignReport, module_size_m: float) -> dict[str, Any]:
     return out
 
 
-def _std(v: np.ndarray, axis: int | None = None) -> Any:
-    """The sample standard deviation over seeds (ddof 1; 0 for a single seed)."""
+def _std(v: np.ndarray, axis: int | None = None) -> Any:  # over seeds: ddof 1, 0 for one seed
     if (v.shape[0] if axis == 0 else v.size) < 2:
         return 0.0 if axis is None else np.zeros(v.shape[1:])
     return float(v.std(ddof=1)) if axis is None else v.std(axis=axis, ddof=1)
@@ -246,8 +246,7 @@ def curves_png(result: dict[str, Any], title: str) -> bytes:
         ax.set_xlabel("environment steps")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    note = "mean ± std over seeds (RL: the policy's evaluation, GA: its best design so far)"
-    fig.suptitle(f"{title}; {note}", fontsize=9)
+    fig.suptitle(f"{title}; mean ± std over seeds (RL: the policy's evaluation, GA: best design so far)", fontsize=9)
     fig.tight_layout()
     return _png(fig)
 
@@ -277,8 +276,6 @@ def design_png(design: DesignReport, title: str) -> bytes:
 
 def report_files(runs: list[SavedRun]) -> tuple[dict[str, bytes], dict[str, Any]]:
     """The files `modsat report` writes: study.json, table.md, curves.png, designs/*.png."""
-    import json
-
     result = study(runs)
     by_path = {r.path: r for r in runs}
     files: dict[str, bytes] = {}

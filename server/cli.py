@@ -562,7 +562,7 @@ def _add_service_commands(sub) -> None:
     from . import cli_service, cli_study
 
     cli_service.add_commands(sub)
-    cli_study.add_commands(sub)
+    cli_study.add_commands(sub, _load_spec, _check_limits)
 
 
 def main(argv: list[str] | None = None) -> int:

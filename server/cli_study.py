@@ -13,7 +13,8 @@ import time
 from typing import IO
 
 
-def add_commands(sub) -> None:
+def add_commands(sub, load_spec, check_limits) -> None:
+    """``load_spec`` and ``check_limits``: `modsat train`'s (server/cli.py), passed in, not imported back."""
     s = sub.add_parser(
         "study",
         help="run one spec over several seeds, RL co-design and its GA twin, here; then write their report",
@@ -27,7 +28,7 @@ def add_commands(sub) -> None:
     s.add_argument("--algorithms", nargs="+", default=["td3-codesign", "ga"], metavar="ALGORITHM")
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--jobs", type=int, default=1, help="runs at once (default 1; at most one per core)")
-    s.set_defaults(func=_cmd_study, steps=None, device=None, seed=None)
+    s.set_defaults(func=_cmd_study, steps=None, device=None, seed=None, load_spec=load_spec, check_limits=check_limits)
 
     r = sub.add_parser(
         "report",
@@ -68,9 +69,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_study(args: argparse.Namespace) -> int:
     from modsat_core.study import algorithm_problem, ga_problem, run_name, seed_problem, study_specs
 
-    from .cli import _check_limits, _load_spec
-
-    base = _load_spec(args)
+    base = args.load_spec(args)
     problems = [p for p in (seed_problem(args.seeds), algorithm_problem(args.algorithms)) if p]
     if "ga" in args.algorithms and (p := ga_problem(base)):
         problems.append(p)
@@ -81,7 +80,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         return 2
     specs = study_specs(base, args.seeds, args.algorithms)
     for spec in specs[:: len(args.seeds)]:
-        _check_limits(spec, "study")
+        args.check_limits(spec, "study")
     os.makedirs(args.out, exist_ok=True)
     todo, dirs = [], []
     for spec in specs:
