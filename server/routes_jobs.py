@@ -29,7 +29,7 @@ from .schemas import (
     job_summary,
     metrics_point,
 )
-from .submit import BadRequest, Invalid, decode_json, spec_from_body
+from .submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
@@ -81,10 +81,7 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
     """Queue a training run. The body is a JobSpec, or `{"preset": NAME, "overrides": {...}}`,
     sent as `application/json`. A spec over this service's limits (memory, env steps,
     evaluation; docs/service.md) is 422 naming the field to lower; a full queue is 429."""
-    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    if ctype != "application/json":
-        # Also a guard: a page of another site can send text/plain or a form without asking first.
-        raise HTTPException(415, f"send the body as application/json (Content-Type was {ctype[:80] or 'missing'!r})")
+    json_content_type(request.headers.get("content-type"))
     try:
         body = decode_json(await request.body())
         spec = spec_from_body(body)
@@ -97,7 +94,7 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
     except BadRequest as exc:
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
-        return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
+        return invalid_response(exc)
     active = await run_in_threadpool(store.active_count)
     if active >= settings.max_active_jobs:
         raise HTTPException(

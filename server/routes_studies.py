@@ -21,7 +21,7 @@ from modsat_core.study_report import FILES, SavedRun, curves_png, run_from_files
 
 from .deps import SettingsDep, StoreDep, WriteAccess
 from .schemas import JobStatus, _time
-from .submit import BadRequest, Invalid, decode_json, spec_from_body
+from .submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
 
@@ -95,6 +95,7 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
         )
     if "spec" not in body:
         raise Invalid([{"loc": ["body", "spec"], "msg": "spec: required (a JobSpec or a preset)", "type": "missing"}])
+    prefix = ["overrides"] if isinstance(body["spec"], dict) and "preset" in body["spec"] else []  # as /api/jobs
     try:
         base = spec_from_body(body["spec"])
     except Invalid as exc:
@@ -114,7 +115,10 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
         problems = check_limits(spec, settings.limits())
         if problems:
             raise Invalid(
-                [{"loc": ["body", "spec", *loc], "msg": msg, "type": "resource_limit"} for loc, msg in problems]
+                [
+                    {"loc": ["body", "spec", *prefix, *loc], "msg": msg, "type": "resource_limit"}
+                    for loc, msg in problems
+                ]
             )
     return base, seeds, algs, specs
 
@@ -139,15 +143,13 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
 )
 async def submit_study(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
     """Queue one job per seed and algorithm, all or none. A study over the queue's room is 429."""
-    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    if ctype != "application/json":
-        raise HTTPException(415, f"send the body as application/json (Content-Type was {ctype[:80] or 'missing'!r})")
+    json_content_type(request.headers.get("content-type"))
     try:
         base, seeds, algs, specs = _job_specs(decode_json(await request.body()), settings)
     except BadRequest as exc:
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
-        return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
+        return invalid_response(exc)
     active = await run_in_threadpool(store.active_count)
     if active + len(specs) > settings.max_active_jobs:
         raise HTTPException(

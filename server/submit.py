@@ -14,6 +14,9 @@ import json
 import logging
 from typing import Any
 
+from fastapi import HTTPException
+from fastapi.responses import JSONResponse
+
 from modsat_core.presets import PRESETS
 from modsat_core.spec import JobSpec, SpecError, parse_spec
 
@@ -42,6 +45,19 @@ def merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     for k, v in overrides.items():
         out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
     return out
+
+
+def json_content_type(content_type: str | None) -> None:
+    """415 unless the body is sent as application/json. Also a guard: a page of another site can
+    send text/plain or a form without asking first."""
+    ctype = (content_type or "").split(";")[0].strip().lower()
+    if ctype != "application/json":
+        raise HTTPException(415, f"send the body as application/json (Content-Type was {ctype[:80] or 'missing'!r})")
+
+
+def invalid_response(exc: Invalid) -> JSONResponse:
+    """The 422 answer of an :class:`Invalid` submission: FastAPI-style ``detail`` plus ``messages``."""
+    return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
 
 
 def decode_json(raw: bytes) -> Any:
