@@ -112,9 +112,8 @@ def _std(v: np.ndarray, axis: int | None = None) -> Any:  # over seeds: ddof 1, 
 
 def _mean_std(values: list[float | None]) -> dict[str, Any]:
     v = np.array([x for x in values if x is not None], dtype=np.float64)
-    if len(v) == 0:
-        return {"mean": None, "std": None, "n": 0}
-    return {"mean": float(v.mean()), "std": _std(v), "n": int(len(v))}
+    mean, std = (float(v.mean()), _std(v)) if len(v) else (None, None)
+    return {"mean": mean, "std": std, "n": int(len(v)), "of": len(values)}
 
 
 _KEYS = ("return", "success_0.25", "success_1", "slew_ratio")
@@ -192,7 +191,8 @@ def study(runs: list[SavedRun]) -> dict[str, Any]:
 def _pm(s: dict[str, Any], scale: float = 1.0, fmt: str = "{:.1f}") -> str:
     if s["mean"] is None:
         return "-"
-    return f"{fmt.format(scale * s['mean'])} ± {fmt.format(scale * s['std'])}"
+    part = f" ({s['n']} of {s['of']} runs)" if s["n"] < s.get("of", 0) else ""  # e.g. no slew landed
+    return f"{fmt.format(scale * s['mean'])} ± {fmt.format(scale * s['std'])}{part}"
 
 
 def table_markdown(result: dict[str, Any]) -> str:

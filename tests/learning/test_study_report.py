@@ -154,3 +154,13 @@ def test_held_curves_wait_for_every_seed(runs):
     first = max(a.curve.points[0].env_steps, b.curve.points[0].env_steps)
     assert c["env_steps"][0] == first and c["env_steps"] == sorted(set(c["env_steps"]))
     assert len(c["mean"]) == len(c["std"]) == len(c["env_steps"])
+
+
+def test_a_figure_some_runs_lack_says_how_many_runs_it_is_over():
+    """A run that landed no slew has no median slew time: the table says over how many runs the
+    figure is, instead of a mean ± 0 that reads like every seed agreeing."""
+    from modsat_core.study_report import _mean_std, _pm
+
+    assert _pm(_mean_std([3.93, None]), fmt="{:.2f}") == "3.93 ± 0.00 (1 of 2 runs)"
+    assert _pm(_mean_std([1.0, 3.0])) == "2.0 ± 1.4"
+    assert _pm(_mean_std([None, None])) == "-"

@@ -7,7 +7,8 @@ const studyState = { selected: null, timer: null };
 
 function pm(s, scale = 1, digits = 1) {
   if (!s || s.mean == null) return "-";
-  return `${(scale * s.mean).toFixed(digits)} \u00b1 ${(scale * s.std).toFixed(digits)}`;
+  const part = s.n < s.of ? ` (${s.n} of ${s.of} runs)` : "";  // e.g. a slew time where no slew landed
+  return `${(scale * s.mean).toFixed(digits)} \u00b1 ${(scale * s.std).toFixed(digits)}${part}`;
 }
 
 function studyCounts(counts) {
