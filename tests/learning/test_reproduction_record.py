@@ -1,0 +1,28 @@
+"""docs/reproduction.md's table is the report of the runs kept beside it: redrawn from their files, it
+must come out the same, and the page must show it (a rerun or an edit of either shows up here)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from modsat_core.study_report import load_run, study, table_markdown
+
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+
+
+@pytest.mark.parametrize("grid", ["3x3x3"])
+def test_the_reproduction_table_is_the_report_of_the_kept_runs(grid):
+    root = DOCS / "reproduction" / grid
+    runs = [load_run(str(p)) for p in sorted((root / "runs").iterdir())]
+    result = study(runs)
+    assert {label: a["finished"] for label, a in result["algorithms"].items()} == {"RL co-design": 3, "GA": 3}
+    table = table_markdown(result)
+    assert table == (root / "report" / "table.md").read_text()
+    assert table in (DOCS / "reproduction.md").read_text()
+    kept = json.loads((root / "report" / "study.json").read_text())
+    for label, a in result["algorithms"].items():
+        assert kept["algorithms"][label]["policy"] == a["policy"]
+        assert kept["algorithms"][label]["curves"] == a["curves"]
