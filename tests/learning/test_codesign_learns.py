@@ -23,7 +23,9 @@ from modsat_core.presets import get_preset
 from modsat_core.spec import parse_spec
 from modsat_core.train import train
 
-pytestmark = pytest.mark.slow  # trains co-design for 15k env steps (about 10 minutes)
+from .conftest import on_the_measured_cpu
+
+pytestmark = [pytest.mark.slow, on_the_measured_cpu]  # trains co-design for 15k env steps (about 10 minutes)
 
 #: Share of the final 32 slews that must land (the measured run: 28). The baselines land none;
 #: 16 of 32 by chance would need a controller that points and holds still, which only training

@@ -21,7 +21,9 @@ from modsat_core.envs import reference_design
 from modsat_core.presets import get_preset
 from modsat_core.spec import parse_spec
 
-pytestmark = pytest.mark.slow  # trains a controller for 40k env steps (minutes)
+from .conftest import on_the_measured_cpu
+
+pytestmark = [pytest.mark.slow, on_the_measured_cpu]  # trains a controller for 40k env steps (minutes)
 
 
 def test_flat_controller_with_the_cpu_recipe_settles_most_slews():
