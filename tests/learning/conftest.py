@@ -19,7 +19,7 @@ def cpu_vendor() -> str:
 
 
 #: The seeded learning runs that tests/learning/test_control_lands.py and test_codesign_learns.py
-#: replay were measured on AMD EPYC machines (AVX-512), where they pass in CI. On an Intel Xeon
+#: replay were measured on AMD EPYC machines (AVX-512). On an Intel Xeon
 #: (also AVX-512; session 21) torch's kernels round differently and the same seeds are other
 #: draws of the recipe: the flat controller reached 91 % of 32 and ended at 41 %, co-design on
 #: `quick` landed 12.5 % (4 of 32). That the recipe does not land every draw is issue 11's open
