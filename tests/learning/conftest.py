@@ -24,9 +24,10 @@ def cpu_vendor() -> str:
 #: draws of the recipe: the flat controller reached 91 % of 32 and ended at 41 %, co-design on
 #: `quick` landed 12.5 % (4 of 32). That the recipe does not land every draw is issue 11's open
 #: aim (docs/learning.md "Status"); these two tests check the measured runs where they were measured.
+_VENDOR = cpu_vendor()
 on_the_measured_cpu = pytest.mark.skipif(
-    cpu_vendor() != "AuthenticAMD",
-    reason=f"replays a seeded run measured on AMD EPYC; this CPU ({cpu_vendor()}) is another draw "
+    _VENDOR != "AuthenticAMD",
+    reason=f"replays a seeded run measured on AMD EPYC; this CPU ({_VENDOR}) is another draw "
     "of the recipe (tests/learning/conftest.py)",
 )
 
