@@ -280,6 +280,9 @@ class CurveFile(Record):
     algorithm: str
     points: list[CurvePoint]
     best_env_steps: int | None = Field(None, description="TD3: the point whose policy the final evaluation flies.")
+    selection: list[dict[str, Any]] | None = Field(
+        None, description="TD3 with `training.select_top_k` > 1: each candidate's figures on the validation slews."
+    )
     designs: list[dict[str, Any]] | None = Field(None, description="GA: every evaluated design, in order.")
     generations: list[dict[str, Any]] | None = Field(None, description="GA: the survivor schedule.")
 

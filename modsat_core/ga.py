@@ -170,8 +170,8 @@ class GARun:
             if run.run(progress, checkpoint, should_stop, budget=budget):
                 return True
             self.inner_ckpt = None
-            assert run.best is not None  # a finished run has evaluated at least once
-            fitness = run.best["mean_return"]
+            assert run.kept  # a finished run has evaluated at least once
+            fitness = run.kept[0]["mean_return"]
             self.used += run.env_steps
             self.records.append(
                 {
@@ -188,7 +188,7 @@ class GARun:
                 self.best_actor = {
                     "fitness": fitness,
                     "grid": grid.tolist(),
-                    "actor": run.best["actor"],
+                    "actor": run.kept[0]["actor"],
                     "record": len(self.records) - 1,
                 }
             self.pending.pop(0)

@@ -224,6 +224,16 @@ class Training(_Section):
     learning_starts: int = Field(10_000, ge=0, le=10_000_000)
     eval_every_steps: int = Field(20_000, ge=1, le=1_000_000_000)
     eval_episodes: int = Field(16, ge=1, le=1000, description="Episodes of each evaluation on the curve.")
+    select_top_k: int = Field(
+        1,
+        ge=1,
+        le=20,
+        description=(
+            "The final evaluation flies the curve's best snapshot (success, then return) or, above 1, "
+            "the best of the curve's k best on validation slews of their own seed, as many as "
+            '`evaluation.episodes` (docs/learning.md, "Outputs of a run"). 1 = the curve\'s best.'
+        ),
+    )
     checkpoint_every_steps: int = Field(50_000, ge=1, le=1_000_000_000)
     device: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` uses a GPU where torch sees one.")
 

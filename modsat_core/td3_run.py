@@ -27,6 +27,7 @@ from .networks import make_critic
 from .policy import design_with
 from .policy_file import actor_from_state, new_actor
 from .reports import curve_point
+from .selection import keep, validate
 from .spec import JobSpec
 from .td3 import TD3, ReplayBuffer, TD3Config
 
@@ -55,7 +56,9 @@ class TD3Run:
         self.next_eval = self.t.eval_every_steps
         self.next_ckpt = self.t.checkpoint_every_steps
         self.curve: list[dict] = []
-        self.best: dict | None = None  # {"mean_return", "actor", "grid", "env_steps"}
+        # The curve's best snapshots, best first, at most `select_top_k`: {"mean_return",
+        # "success_rate", "env_steps", "grid", "actor"} (selection.py).
+        self.kept: list[dict] = []
         self.recent: list[dict] = []  # finished training episodes since the last progress call
         self.last_info: dict = {}
         self.explore_design = torch.ones(self.env.B, dtype=torch.bool, device=device)
@@ -176,7 +179,7 @@ class TD3Run:
             if self.env_steps >= self.next_ckpt and not last:
                 on_checkpoint(self.state_dict())
                 self.next_ckpt = (self.env_steps // self.t.checkpoint_every_steps + 1) * self.t.checkpoint_every_steps
-        if self.best is None:  # a budget smaller than one batch: the untrained policy
+        if not self.kept:  # a budget smaller than one batch: the untrained policy
             on_progress(self.progress(total, self.evaluate_now()))
         return False
 
@@ -218,14 +221,7 @@ class TD3Run:
         grid = self.current_grid()
         point = curve_point(actor, grid, self.spec, self.env_steps, self.agent.updates, self.env.penalty)
         self.curve.append(point)
-        if self.best is None or _rank(point) > _rank(self.best):
-            self.best = {
-                "mean_return": point["mean_return"],
-                "success_rate": point["success_rate"],
-                "env_steps": self.env_steps,
-                "grid": grid,
-                "actor": {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()},
-            }
+        self.kept = keep(self.kept, point, actor, grid, self.t.select_top_k)
         return point
 
     def progress(self, total: int, point: dict | None) -> dict:
@@ -247,11 +243,16 @@ class TD3Run:
                 out[k] = self.last_info[k]
         return ProgressRecord.model_validate(out).to_dict()
 
-    def best_actor(self) -> tuple[torch.nn.Module, np.ndarray]:
-        """The snapshot the final evaluation uses (best success rate on the curve, then best
-        return), and its design."""
-        assert self.best is not None  # run() evaluates at least once before it returns False
-        return actor_from_state(self.spec, self.best["actor"]), self.best["grid"]
+    def chosen(self) -> tuple[torch.nn.Module, np.ndarray, dict]:
+        """The policy the final evaluation flies, its design, and ``curve.json``'s record of the
+        choice: the curve's best or, with `select_top_k` > 1, the best of the curve's top k on
+        the validation slews (selection.py)."""
+        assert self.kept  # run() evaluates at least once before it returns False
+        snapshot, scores = validate(self.kept, self.spec)
+        extra: dict = {"best_env_steps": snapshot["env_steps"]}
+        if scores:
+            extra["selection"] = scores
+        return actor_from_state(self.spec, snapshot["actor"]), snapshot["grid"], extra
 
     # ------------------------------------------------------------------ checkpoint
     def state_dict(self) -> dict:
@@ -262,7 +263,7 @@ class TD3Run:
             "next_eval": self.next_eval,
             "next_ckpt": self.next_ckpt,
             "curve": copy.deepcopy(self.curve),
-            "best": self.best,
+            "kept": self.kept,
             "agent": to_cpu(self.agent.state_dict()),
             "env": to_cpu(self.env.state_dict()),
             "buffer": to_cpu(self.buffer.state_dict()) if keep_buffer else None,
@@ -276,9 +277,11 @@ class TD3Run:
     def load_state_dict(self, d: dict) -> None:
         self.env_steps, self.update_credit = d["env_steps"], d["update_credit"]
         self.next_eval, self.next_ckpt = d["next_eval"], d["next_ckpt"]
-        self.curve, self.best = list(d["curve"]), d["best"]
-        if self.best is not None:  # the grid is a list in a checkpoint's bytes (weights_only loading)
-            self.best["grid"] = np.asarray(self.best["grid"], dtype=np.int64)
+        self.curve = list(d["curve"])
+        # Checkpoints from before `select_top_k` hold one snapshot, "best".
+        self.kept = list(d["kept"]) if "kept" in d else [d["best"]] if d.get("best") else []
+        for s in self.kept:  # the grid is a list in a checkpoint's bytes (weights_only loading)
+            s["grid"] = np.asarray(s["grid"], dtype=np.int64)
         self.agent.load_state_dict(to_device(d["agent"], self.device))
         self.env.load_state_dict(to_device(d["env"], self.device))
         if d["buffer"] is not None:
@@ -291,9 +294,3 @@ class TD3Run:
         self.explore_design.copy_(d["explore_design"])
         if "noise_u" in d:  # checkpoints from before `exploration_noise_min` have none
             self.noise_u.copy_(d["noise_u"])
-
-
-def _rank(point: dict) -> tuple[float, float]:
-    """Snapshots are compared by success rate first, then by return (a policy that lands
-    more slews beats one that collects more shaping reward without landing them)."""
-    return point.get("success_rate", 0.0), point["mean_return"]

@@ -78,7 +78,6 @@ def train(
             eval=None,
         ).to_dict()
     )
-    actor, grid = run.best_actor()
-    assert run.best is not None  # best_actor() needs it too
-    files, summary = run_files(spec, run.curve, actor, grid, {"best_env_steps": run.best["env_steps"]})
+    actor, grid, chosen = run.chosen()
+    files, summary = run_files(spec, run.curve, actor, grid, chosen)
     return RunResult(stopped=False, env_steps=run.env_steps, curve=run.curve, files=files, summary=summary)

@@ -36,13 +36,15 @@ def test_a_crafted_pickle_checkpoint_is_refused_with_a_clear_error():
 def _run_with_a_best(tiny) -> TD3Run:
     run = TD3Run(tiny())
     grid = run.current_grid()
-    run.best = {
-        "mean_return": -1.0,
-        "success_rate": 0.0,
-        "env_steps": 0,
-        "grid": np.asarray(grid, dtype=np.int64),
-        "actor": {k: v.clone() for k, v in run.agent.actor.state_dict().items()},
-    }
+    run.kept = [
+        {
+            "mean_return": -1.0,
+            "success_rate": 0.0,
+            "env_steps": 0,
+            "grid": np.asarray(grid, dtype=np.int64),
+            "actor": {k: v.clone() for k, v in run.agent.actor.state_dict().items()},
+        }
+    ]
     return run
 
 
@@ -50,11 +52,11 @@ def test_a_checkpoint_is_plain_data_and_resumes_with_its_grid(tiny):
     run = _run_with_a_best(tiny)
     data = checkpoint_to_bytes({"version": CHECKPOINT_VERSION, "env_steps": 0, "run": run.state_dict()})
     raw = torch.load(io.BytesIO(data), weights_only=True)  # no numpy, no allow-list needed
-    assert raw["run"]["best"]["grid"] == run.best["grid"].tolist()
+    assert raw["run"]["kept"][0]["grid"] == run.kept[0]["grid"].tolist()
     again = TD3Run(tiny())
     again.load_state_dict(checkpoint_from_bytes(data)["run"])
-    assert again.best is not None and isinstance(again.best["grid"], np.ndarray)
-    assert again.best["grid"].dtype == np.int64 and np.array_equal(again.best["grid"], run.best["grid"])
+    assert len(again.kept) == 1 and isinstance(again.kept[0]["grid"], np.ndarray)
+    assert again.kept[0]["grid"].dtype == np.int64 and np.array_equal(again.kept[0]["grid"], run.kept[0]["grid"])
     assert again.rng.bit_generator.state == run.rng.bit_generator.state
 
 
@@ -68,4 +70,19 @@ def test_a_checkpoint_written_before_the_rule_still_reads(tiny):
     ck = checkpoint_from_bytes(buf.getvalue())
     again = TD3Run(tiny())
     again.load_state_dict(ck["run"])
-    assert again.best is not None and np.array_equal(again.best["grid"], run.best["grid"])
+    assert len(again.kept) == 1 and np.array_equal(again.kept[0]["grid"], run.kept[0]["grid"])
+
+
+def test_a_checkpoint_from_before_select_top_k_reads_its_one_snapshot(tiny):
+    """Before `training.select_top_k` a checkpoint held one snapshot under "best"."""
+    run = _run_with_a_best(tiny)
+    state = run.state_dict()
+    state["best"] = state.pop("kept")[0]
+    data = checkpoint_to_bytes({"version": CHECKPOINT_VERSION, "env_steps": 0, "run": state})
+    again = TD3Run(tiny())
+    again.load_state_dict(checkpoint_from_bytes(data)["run"])
+    assert len(again.kept) == 1 and np.array_equal(again.kept[0]["grid"], run.kept[0]["grid"])
+    state["best"] = None  # a run checkpointed before its first evaluation
+    data = checkpoint_to_bytes({"version": CHECKPOINT_VERSION, "env_steps": 0, "run": state})
+    again.load_state_dict(checkpoint_from_bytes(data)["run"])
+    assert again.kept == []
