@@ -142,7 +142,10 @@ class GARun:
             grid = self.pending[0]
             budget = min(self.spec.ga.steps_per_design, total - self.used)
             seed = (self.spec.seed * 7919 + len(self.records)) % (2**31)
-            inner_spec = self.spec.model_copy(update={"seed": seed})
+            # The GA reads the inner run's curve best (`kept[0]`), which `select_top_k` does not
+            # change: one snapshot, not k copies in every inner checkpoint.
+            one = self.spec.training.model_copy(update={"select_top_k": 1})
+            inner_spec = self.spec.model_copy(update={"seed": seed, "training": one})
             run = TD3Run(inner_spec, fixed_grid=grid, device=self.device)
             if self.inner_ckpt is not None:
                 run.load_state_dict(self.inner_ckpt)

@@ -22,8 +22,9 @@ def cpu_vendor() -> str:
 #: replay were measured on AMD EPYC machines (AVX-512). On an Intel Xeon
 #: (also AVX-512; session 21) torch's kernels round differently and the same seeds are other
 #: draws of the recipe: the flat controller reached 91 % of 32 and ended at 41 %, co-design on
-#: `quick` landed 12.5 % (4 of 32). That the recipe does not land every draw is issue 11's open
-#: aim (docs/learning.md "Status"); these two tests check the measured runs where they were measured.
+#: `quick` landed 12.5 % (4 of 32). `quick`'s recipe does not land every draw (seeds 1, 2: 61 %,
+#: 0 % of 100, docs/learning.md "Twenty-first round"); these two tests check the measured runs
+#: where they were measured.
 _VENDOR = cpu_vendor()
 on_the_measured_cpu = pytest.mark.skipif(
     _VENDOR != "AuthenticAMD",
