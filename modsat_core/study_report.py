@@ -286,10 +286,10 @@ def report_files(runs: list[SavedRun]) -> tuple[dict[str, bytes], dict[str, Any]
             while name in files:  # two runs of one method and seed (e.g. two budgets)
                 k += 1
                 name = f"designs/{slug}-seed{d['seed']}-{k}.png"
-            title = f"{label}, seed {d['seed']}: {d['modules']} modules, {d['actuators']} actuators"
+            acts = f"{d['actuators']} actuator{'s' * (d['actuators'] != 1)}"
             design = by_path[d["run"]].design
             assert design is not None  # only runs with a design are in "designs"
-            files[name] = design_png(design, title)
+            files[name] = design_png(design, f"{label}, seed {d['seed']}: {d['modules']} modules, {acts}")
             d["png"] = name
     n = result["grid_size"]
     title = f"{n}x{n}x{n}: {runs[0].spec.mission.tolerance_deg:g} deg tolerance"
