@@ -13,12 +13,12 @@ from modsat_core.study_report import load_run, study, table_markdown
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 
-@pytest.mark.parametrize("grid", ["3x3x3"])
-def test_the_reproduction_table_is_the_report_of_the_kept_runs(grid):
+@pytest.mark.parametrize(("grid", "seeds"), [("3x3x3", 3), ("5x5x5", 3)])
+def test_the_reproduction_table_is_the_report_of_the_kept_runs(grid, seeds):
     root = DOCS / "reproduction" / grid
     runs = [load_run(str(p)) for p in sorted((root / "runs").iterdir())]
     result = study(runs)
-    assert {label: a["finished"] for label, a in result["algorithms"].items()} == {"RL co-design": 3, "GA": 3}
+    assert {label: a["finished"] for label, a in result["algorithms"].items()} == {"RL co-design": seeds, "GA": seeds}
     table = table_markdown(result)
     assert table == (root / "report" / "table.md").read_text()
     assert table in (DOCS / "reproduction.md").read_text()
