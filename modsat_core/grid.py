@@ -16,6 +16,11 @@ EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
 _NEIGHBOURS = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
 
 
+def describe(modules: int, actuators: int) -> str:
+    """A design's size in words ("27 modules, 1 actuator"), as the CLI, the viewer and the study report say it."""
+    return f"{modules} module{'s' * (modules != 1)}, {actuators} actuator{'s' * (actuators != 1)}"
+
+
 def as_grid(design) -> np.ndarray:
     """A design (nested lists or array) as an int8 array of shape (N, N, N)."""
     grid = np.asarray(design, dtype=np.int64)

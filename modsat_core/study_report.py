@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .artefacts import ArtefactError, CurveFile, DesignReport, EvaluationReport, EvaluationSummary
-from .grid import ACTUATOR, EMPTY
+from .grid import ACTUATOR, EMPTY, describe
 from .spec import JobSpec, parse_spec
 
 LABELS = {"td3-codesign": "RL co-design", "ga": "GA", "td3-control": "TD3 (fixed design)"}
@@ -286,10 +286,9 @@ def report_files(runs: list[SavedRun]) -> tuple[dict[str, bytes], dict[str, Any]
             while name in files:  # two runs of one method and seed (e.g. two budgets)
                 k += 1
                 name = f"designs/{slug}-seed{d['seed']}-{k}.png"
-            acts = f"{d['actuators']} actuator{'s' * (d['actuators'] != 1)}"
             design = by_path[d["run"]].design
             assert design is not None  # only runs with a design are in "designs"
-            files[name] = design_png(design, f"{label}, seed {d['seed']}: {d['modules']} modules, {acts}")
+            files[name] = design_png(design, f"{label}, seed {d['seed']}: {describe(d['modules'], d['actuators'])}")
             d["png"] = name
     n = result["grid_size"]
     title = f"{n}x{n}x{n}: {runs[0].spec.mission.tolerance_deg:g} deg tolerance"

@@ -341,10 +341,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _print_evaluation(summary: dict, stream) -> None:
     from modsat_core.artefacts import RunSummary
+    from modsat_core.grid import describe
 
     s = RunSummary.parse(summary)
     d = s.design
-    print(f"design: {d and d.modules} modules, {d and d.actuators} actuators, valid={d and d.valid}", file=stream)
+    print(f"design: {describe(d.modules, d.actuators)}, valid={d.valid}" if d else "design: none", file=stream)
     print(
         f"{'':<12} {'episodes':>8} {'success':>8} {'@0.25deg':>9} {'@1deg':>7} {'return':>16} {'slew/bound':>10}",
         file=stream,

@@ -23,6 +23,8 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
+from modsat_core.grid import describe
+
 from .origin import host_allowed, host_names, origin_allowed
 from .run import CONTROLLERS, Episode, RunData, sample_period
 from .scene import draw_satellite, lay_out
@@ -273,7 +275,7 @@ class Session:
         for r in self.runs:
             mass = r.design.mass_kg
             lines.append(
-                f"**{r.short_algorithm}: {r.title}**: {r.modules} modules, {r.actuators} actuators"
+                f"**{r.short_algorithm}: {r.title}**: {describe(r.modules, r.actuators)}"
                 + (f", {mass:.1f} kg" if mass is not None else "")
             )
             ev = r.evaluation
