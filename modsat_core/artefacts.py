@@ -7,7 +7,7 @@ One owner for the formats of
 * ``design.json``, ``evaluation.json``, ``trajectories.json`` and ``curve.json``;
 * the short evaluation summary of a finished run (the API's ``evaluation`` of a job).
 
-The writers (modsat_core.reports, td3_run, ga), the job store, the API models, the viewer
+The writers (modsat_core.evaluation.run_files, td3_run, ga), the job store, the API models, the viewer
 (web.run) and the tests build and read them through these models (docs/learning.md,
 "Outputs of a run", lists the files). A record keeps the keys it was given, in their order,
 and only those: an optional key a writer left out is absent from the file and from the API,
@@ -25,7 +25,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_serializer, model_validator
 
-from .grid import ACTUATOR, EMPTY, as_grid, is_valid
+from modsat_core.grid import ACTUATOR, EMPTY, as_grid, is_valid
 
 #: ``types`` of design.json: what the grid's numbers mean.
 CELL_TYPES = {"0": "empty", "1": "structure", "2": "actuator"}

@@ -22,8 +22,8 @@ from sqlalchemy.exc import TimeoutError as SQLAlchemyTimeoutError
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import modsat_core
-from modsat_core.presets import PRESETS
-from modsat_core.spec import JobSpec
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.presets import PRESETS
 from worker.store import JobStore
 
 from .deps import StoreDep

@@ -39,7 +39,7 @@ DEFAULT_PG = "postgresql://postgres@127.0.0.1:5432/postgres"
 
 
 def _spec_json() -> str:
-    from modsat_core.presets import get_preset
+    from modsat_core.spec.presets import get_preset
 
     return get_preset("quick").model_copy(update={"name": "bench"}).model_dump_json()
 

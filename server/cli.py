@@ -17,7 +17,7 @@ import time
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from modsat_core.bench import bench_sim
+    from modsat_core.bench.sim import bench_sim
 
     report = bench_sim(batch_sizes=tuple(args.batch), min_seconds=args.seconds, dtype=args.dtype)
     if args.json:
@@ -34,7 +34,7 @@ MAX_BENCH_CELL_ROWS = 256_000
 
 
 def _cmd_bench_update(args: argparse.Namespace) -> int:
-    from modsat_core.bench_update import bench_update
+    from modsat_core.bench.update import bench_update
 
     if not (
         1 <= args.rounds <= 100
@@ -72,7 +72,7 @@ def _cmd_bench_update(args: argparse.Namespace) -> int:
 
 def _cmd_bench_learning(args: argparse.Namespace) -> int:
     _set_threads(None)
-    from modsat_core.bench_learning import bench_learn, bench_rl_vs_ga
+    from modsat_core.bench.learning import bench_learn, bench_rl_vs_ga
 
     spec = _load_spec(args)
     if args.out:  # before hours of training, not after
@@ -89,7 +89,7 @@ def _cmd_bench_learning(args: argparse.Namespace) -> int:
 
 def _cmd_bench_control(args: argparse.Namespace) -> int:
     _set_threads(None)
-    from modsat_core.bench_control import bench_control
+    from modsat_core.training.td3_control import bench_control
 
     if args.eval_every < 1:
         raise SystemExit("modsat bench control: --eval-every must be at least 1")
@@ -117,7 +117,7 @@ def _print_report(report: dict, path: str | None) -> None:
 
 
 def _cmd_presets(args: argparse.Namespace) -> int:
-    from modsat_core.presets import PRESETS, get_preset
+    from modsat_core.spec.presets import PRESETS, get_preset
 
     if args.name:
         print(get_preset(args.name).model_dump_json(indent=2))
@@ -132,10 +132,10 @@ def _cmd_presets(args: argparse.Namespace) -> int:
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
-    from modsat_core.spec import JobSpec
+    from modsat_core.spec.jobspec import JobSpec
 
     if args.markdown:
-        from modsat_core.specdoc import spec_markdown
+        from modsat_core.spec.doc import spec_markdown
 
         print(spec_markdown(), end="")
     else:
@@ -158,7 +158,7 @@ def _limits():
 
 
 def _check_limits(spec, command: str) -> None:
-    from modsat_core.limits import check
+    from modsat_core.spec.limits import check
 
     problems = check(spec, _limits())
     if problems:
@@ -171,8 +171,8 @@ def _check_limits(spec, command: str) -> None:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from modsat_core.limits import estimate
-    from modsat_core.spec import parse_spec
+    from modsat_core.spec.jobspec import parse_spec
+    from modsat_core.spec.limits import estimate
 
     with open(args.spec, "rb") as fh:
         spec = parse_spec(fh.read())
@@ -202,8 +202,8 @@ def _set_threads(n: int | None) -> None:
 
 
 def _load_spec(args: argparse.Namespace):
-    from modsat_core.presets import get_preset
-    from modsat_core.spec import parse_spec
+    from modsat_core.spec.jobspec import parse_spec
+    from modsat_core.spec.presets import get_preset
 
     if (args.preset is None) == (args.spec is None):
         raise SystemExit("modsat train: give either --preset NAME or a SPEC.json file")
@@ -269,8 +269,8 @@ class _ProgressBar:
 
 def _cmd_train(args: argparse.Namespace) -> int:
 
-    from modsat_core.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
-    from modsat_core.train import train
+    from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
+    from modsat_core.training.train import train
 
     spec = _load_spec(args)
     _check_limits(spec, "train")
@@ -311,7 +311,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    from modsat_core.verify import add_verification
+    from modsat_core.verify.run import add_verification
     from web.recording import (
         add_recording,  # the 3D replay, evaluation.viser (docs/viewer.md)
     )
@@ -369,8 +369,8 @@ def _print_evaluation(summary: dict, stream) -> None:
 def _cmd_eval(args: argparse.Namespace) -> int:
     _set_threads(None)
 
-    from modsat_core.policy_file import load_policy
-    from modsat_core.reports import final_evaluation
+    from modsat_core.agent.policy_file import load_policy
+    from modsat_core.evaluation.run_files import final_evaluation
 
     path = os.path.join(args.run_dir, "policy.pt")
     with open(path, "rb") as fh:
@@ -387,7 +387,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         print(json.dumps(ev, indent=2))
     else:
         from modsat_core.artefacts import EvaluationReport
-        from modsat_core.reports import design_report, run_summary
+        from modsat_core.evaluation.run_files import design_report, run_summary
 
         summary = run_summary(EvaluationReport.model_validate(ev), design_report(grid, spec))
         _print_evaluation(summary.to_dict(), sys.stdout)
@@ -396,7 +396,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 def _cmd_verify(args: argparse.Namespace) -> int:
     _set_threads(None)
-    from modsat_core.verify import (
+    from modsat_core.verify.run import (
         BASILISK_MISSING,
         DEFAULT_WHEEL_INERTIA_KGM2,
         WheelOptions,
@@ -574,7 +574,7 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "episodes", None) is not None and not 1 <= args.episodes <= 10_000:
         print("modsat: --episodes must be between 1 and 10,000", file=sys.stderr)
         return 2
-    from modsat_core.spec import SpecError
+    from modsat_core.spec.jobspec import SpecError
 
     try:
         rc = args.func(args)

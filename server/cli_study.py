@@ -44,7 +44,7 @@ def add_commands(sub, load_spec, check_limits) -> None:
 
 def _write_report(run_dirs: list[str], out: str) -> int:
     from modsat_core.artefacts import ArtefactError
-    from modsat_core.study_report import load_run, report_files
+    from modsat_core.evaluation.study_report import load_run, report_files
 
     try:
         runs = [load_run(d) for d in dict.fromkeys(os.path.normpath(d) for d in run_dirs)]
@@ -67,7 +67,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_study(args: argparse.Namespace) -> int:
-    from modsat_core.study import algorithm_problem, ga_problem, run_name, seed_problem, study_specs
+    from modsat_core.spec.study import algorithm_problem, ga_problem, run_name, seed_problem, study_specs
 
     base = args.load_spec(args)
     problems = [p for p in (seed_problem(args.seeds), algorithm_problem(args.algorithms)) if p]

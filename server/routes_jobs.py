@@ -13,7 +13,7 @@ from fastapi import APIRouter, Header, HTTPException, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
-from modsat_core.limits import check as check_limits
+from modsat_core.spec.limits import check as check_limits
 from worker.db import TERMINAL_STATUSES
 
 from .deps import SettingsDep, StoreDep, WriteAccess

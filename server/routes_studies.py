@@ -1,6 +1,6 @@
 """``/api/studies``: one spec run over several seeds and algorithms (RL co-design and its GA twin
 at the same env-step budget), created in one request; its jobs' status, the aggregate (the table
-and the curves of modsat_core.study_report) and the figure as it fills in."""
+and the curves of modsat_core.evaluation.study_report) and the figure as it fills in."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from modsat_core.artefacts import ArtefactError, CurveFile, CurvePoint
-from modsat_core.limits import check as check_limits
-from modsat_core.spec import JobSpec
-from modsat_core.study import ALGORITHMS, MAX_SEEDS, algorithm_problem, ga_problem, seed_problem, study_specs
-from modsat_core.study_report import FILES, SavedRun, curves_png, run_from_files, study, table_markdown
+from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, run_from_files, study, table_markdown
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.limits import check as check_limits
+from modsat_core.spec.study import ALGORITHMS, MAX_SEEDS, algorithm_problem, ga_problem, seed_problem, study_specs
 
 from .deps import SettingsDep, StoreDep, WriteAccess
 from .schemas import JobStatus, _time

@@ -9,7 +9,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from modsat_core.artefacts import CurvePoint, ProgressRecord, RunSummary
-from modsat_core.presets import PRESETS
+from modsat_core.spec.presets import PRESETS
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 

@@ -17,8 +17,8 @@ from typing import Any
 from fastapi import HTTPException
 from fastapi.responses import JSONResponse
 
-from modsat_core.presets import PRESETS
-from modsat_core.spec import JobSpec, SpecError, parse_spec
+from modsat_core.spec.jobspec import JobSpec, SpecError, parse_spec
+from modsat_core.spec.presets import PRESETS
 
 log = logging.getLogger("modsat.server")
 

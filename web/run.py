@@ -2,7 +2,7 @@
 
 ``design.json`` gives the grid (0 empty, 1 structure, 2 actuator); ``trajectories.json``
 gives, per controller (``policy`` and ``pd_baseline``), the time histories of the first few
-evaluation slews (modsat_core.evaluate.monte_carlo): ``t_s`` (T,), ``q_BN`` (T, 4) scalar
+evaluation slews (modsat_core.evaluation.monte_carlo.monte_carlo): ``t_s`` (T,), ``q_BN`` (T, 4) scalar
 first, ``omega_B`` (T, 3) rad/s, ``h_B`` (T, 3) wheel momentum in N m s, ``error_deg`` (T,),
 ``q_TN`` (4,) and the episode's ``metrics``. Both controllers fly the same seeded slews, and
 so do two runs with the same evaluation seed: episode i is comparable across them. The files

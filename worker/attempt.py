@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlchemyError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 
-from modsat_core.limits import check as check_limits
-from modsat_core.spec import SpecError, parse_spec
+from modsat_core.spec.jobspec import SpecError, parse_spec
+from modsat_core.spec.limits import check as check_limits
 
 from .child import ORPHAN_EXIT_CODE, child_main
 from .settings import WorkerSettings

@@ -11,7 +11,7 @@ message                                    meaning
 ``("result", info, {name: bytes})``        ``train`` returned; ``info`` has ``stopped``,
                                            ``env_steps`` and ``summary``
 ``("error", "Type: message", traceback,   ``train`` raised; ``permanent``: retrying cannot
-permanent)``                                help (:class:`~modsat_core.spec.UnrunnableSpec`)
+permanent)``                                help (:class:`~modsat_core.spec.jobspec.UnrunnableSpec`)
 =========================================  ===============================================
 
 ``should_stop`` is a multiprocessing Event that the parent sets on cancel or shutdown. A
@@ -75,7 +75,7 @@ def child_main(
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True, name="parent-watch").start()
     permanent: tuple[type, ...] = ()
     try:
-        from modsat_core.spec import UnrunnableSpec, parse_spec
+        from modsat_core.spec.jobspec import UnrunnableSpec, parse_spec
 
         permanent = (UnrunnableSpec,)
         set_torch_threads(torch_threads)

@@ -1,4 +1,4 @@
-"""What a job runs. The default is ``modsat_core.train.train`` (through worker/train_runner.py,
+"""What a job runs. The default is ``modsat_core.training.train.train`` (through worker/train_runner.py,
 which adds the ``evaluation.viser`` recording to a finished run's files); the others are real runners
 that follow the same contract (docs/train-interface.md) for tests and benchmarks of the
 queue, without the cost of training:

@@ -13,7 +13,7 @@ from pathlib import Path
 from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from modsat_core.limits import GIB, Limits
+from modsat_core.spec.limits import GIB, Limits
 
 DEFAULT_DATA_DIR = Path("modsat-data")
 DB_FILE_NAME = "modsat.db"
@@ -60,7 +60,7 @@ class WorkerSettings(BaseSettings):
     )
     runner: str = Field(
         "train",
-        description="What a job runs: `train` (modsat_core.train.train), or `noop` / `simulated` / `raise` "
+        description="What a job runs: `train` (modsat_core.training.train.train), or `noop` / `simulated` / `raise` "
         "(test and benchmark runners in worker.runners), or `package.module:function`.",
     )
 
@@ -76,7 +76,7 @@ class WorkerSettings(BaseSettings):
         gt=0,
         le=1 << 20,
         description="A spec whose estimated peak memory (replay buffer, update, stepping, evaluation; "
-        "modsat_core/limits.py) is larger is refused (422 at the API). Default: 8, or half the machine's "
+        "modsat_core/spec/limits.py) is larger is refused (422 at the API). Default: 8, or half the machine's "
         "memory if that is less. Empty = no limit.",
     )
     max_env_steps: int | None = Field(
@@ -100,7 +100,7 @@ class WorkerSettings(BaseSettings):
         return None if isinstance(v, str) and not v.strip() else v
 
     def limits(self) -> Limits:
-        """The per-job limits these settings set (modsat_core.limits)."""
+        """The per-job limits these settings set (modsat_core.spec.limits)."""
         mem = None if self.max_job_memory_gib is None else int(self.max_job_memory_gib * GIB)
         return Limits(
             max_memory_bytes=mem,

@@ -1,20 +1,20 @@
-"""The default runner, ``train``: :func:`modsat_core.train.train`, and for a finished run the
+"""The default runner, ``train``: :func:`modsat_core.training.train.train`, and for a finished run the
 ``evaluation.viser`` recording of its evaluation slews (web.recording), made from
 the run's own ``design.json`` and ``trajectories.json`` in the training child process, and,
-where the spec asks (``evaluation.basilisk``), ``verification.json`` (modsat_core.verify).
+where the spec asks (``evaluation.basilisk``), ``verification.json`` (modsat_core.verify.run).
 
 Imported only in the training child (it loads torch)."""
 
 from __future__ import annotations
 
-from modsat_core.checkpoint import RunResult, checkpoint_from_bytes, checkpoint_to_bytes  # noqa: F401 - the runner's codec
-from modsat_core.train import train as _train
-from modsat_core.verify import add_verification
+from modsat_core.training.checkpoint import RunResult, checkpoint_from_bytes, checkpoint_to_bytes  # noqa: F401 - the runner's codec
+from modsat_core.training.train import train as _train
+from modsat_core.verify.run import add_verification
 from web.recording import add_recording
 
 
 def train(spec, *, on_progress=None, on_checkpoint=None, should_stop=None, checkpoint=None) -> RunResult:
-    """``modsat_core.train.train``, plus ``evaluation.viser`` (and ``verification.json``) among
+    """``modsat_core.training.train.train``, plus ``evaluation.viser`` (and ``verification.json``) among
     the files of a finished run."""
     result = _train(
         spec, on_progress=on_progress, on_checkpoint=on_checkpoint, should_stop=should_stop, checkpoint=checkpoint

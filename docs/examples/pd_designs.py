@@ -10,11 +10,11 @@ import sys
 
 import numpy as np
 
-from modsat_core.evaluate import monte_carlo
+from modsat_core.evaluation.monte_carlo import monte_carlo
 from modsat_core.grid import ACTUATOR, STRUCTURE
-from modsat_core.pd import PDController
-from modsat_core.presets import get_preset
-from modsat_core.slew import Design
+from modsat_core.sim.pd import PDController
+from modsat_core.sim.slew import Design
+from modsat_core.spec.presets import get_preset
 
 
 def cube(actuators):

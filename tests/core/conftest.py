@@ -1,8 +1,8 @@
 import numpy as np
 import torch
 
-from modsat_core import dynamics as dyn
-from modsat_core.morphology import mass_properties
+from modsat_core.sim import dynamics as dyn
+from modsat_core.sim.morphology import mass_properties
 
 
 def make_plant(

@@ -7,9 +7,9 @@ import pytest
 import torch
 from scipy.integrate import solve_ivp
 
-from modsat_core import dynamics as dyn
-from modsat_core import quaternion as quat
-from modsat_core.bench import NumpySatellite
+from modsat_core.bench.sim import NumpySatellite
+from modsat_core.sim import dynamics as dyn
+from modsat_core.sim import quaternion as quat
 
 from .conftest import asymmetric_inertia, make_plant, make_state
 
@@ -121,7 +121,7 @@ def test_gravity_gradient_zero_for_cube_symmetric_body():
 
 def test_gravity_gradient_matches_formula_for_elongated_body():
     # A 5-module rod along body x: I_axial = 5 m a^2/6, I_transverse = that + m a^2 (4+1+0+1+4).
-    from modsat_core.morphology import mass_properties
+    from modsat_core.sim.morphology import mass_properties
 
     g = np.zeros((5, 5, 5), dtype=int)
     g[:, 2, 2] = 1

@@ -6,7 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import modsat_core  # noqa: F401  (registers the env)
-from modsat_core.envs import SatelliteSlewEnv, SatelliteSlewVectorEnv, reference_design
+from modsat_core.sim.gym_envs import SatelliteSlewEnv, SatelliteSlewVectorEnv, reference_design
 
 SHORT = {"mission": {"episode_steps": 25}}  # short episodes so the tests cross resets
 

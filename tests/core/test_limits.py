@@ -1,4 +1,4 @@
-"""modsat_core/limits.py: its constants agree with the code they estimate, the presets fit the
+"""modsat_core/spec/limits.py: its constants agree with the code they estimate, the presets fit the
 defaults, the issue's over-sized specs do not, and the CLI says so readably."""
 
 from __future__ import annotations
@@ -9,9 +9,8 @@ import sys
 
 import pytest
 
-from modsat_core import limits
-from modsat_core.presets import PRESETS, get_preset
-from modsat_core.spec import parse_spec
+from modsat_core.spec import limits, parse_spec
+from modsat_core.spec.presets import PRESETS, get_preset
 
 
 def _spec(**sections):
@@ -22,9 +21,9 @@ def _spec(**sections):
 
 
 def test_constants_agree_with_the_code():
-    from modsat_core.checkpoint import replay_buffer_bytes
-    from modsat_core.features import N_FEATURES
-    from modsat_core.networks import SET_CELL_WIDTH
+    from modsat_core.agent.networks import SET_CELL_WIDTH
+    from modsat_core.codesign.features import N_FEATURES
+    from modsat_core.training.checkpoint import replay_buffer_bytes
 
     assert limits.N_FEATURES == N_FEATURES and limits.SET_CELL_WIDTH == SET_CELL_WIDTH
     for n in (2, 3, 5, 10):
@@ -33,7 +32,7 @@ def test_constants_agree_with_the_code():
 
 def test_validating_limits_imports_no_torch():
     code = (
-        "import sys; from modsat_core import limits; from modsat_core.presets import get_preset; "
+        "import sys; from modsat_core.spec import limits; from modsat_core.spec.presets import get_preset; "
         "limits.check(get_preset('paper-5x5x5'), limits.Limits()); print('torch' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

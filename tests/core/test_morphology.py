@@ -11,7 +11,7 @@ from modsat_core.grid import (
     is_valid,
     validity_problem,
 )
-from modsat_core.morphology import (
+from modsat_core.sim.morphology import (
     mass_properties,
     mass_properties_batched,
     seed_component_batched,

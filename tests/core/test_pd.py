@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from modsat_core.envs import reference_design
-from modsat_core.evaluate import monte_carlo
-from modsat_core.pd import PDController
-from modsat_core.presets import get_preset
-from modsat_core.slew import Design
+from modsat_core.evaluation.monte_carlo import monte_carlo
+from modsat_core.sim.gym_envs import reference_design
+from modsat_core.sim.pd import PDController
+from modsat_core.sim.slew import Design
+from modsat_core.spec.presets import get_preset
 
 
 def test_pd_flies_100_slews_within_quarter_degree_without_safety_violation():

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import torch
 
-from modsat_core import quaternion as quat
+from modsat_core.sim import quaternion as quat
 
 
 def rand_q(rng, n=5):

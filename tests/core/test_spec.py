@@ -5,8 +5,8 @@ import json
 import pytest
 from pydantic import ValidationError
 
-from modsat_core.presets import PRESETS, get_preset
-from modsat_core.spec import JobSpec, SpecError, Training, parse_spec
+from modsat_core.spec.jobspec import JobSpec, SpecError, Training, parse_spec
+from modsat_core.spec.presets import PRESETS, get_preset
 
 
 def messages(data) -> list[str]:
@@ -141,7 +141,7 @@ def test_every_number_in_the_schema_is_bounded():
 def test_docs_spec_md_is_generated_from_the_current_schema():
     from pathlib import Path
 
-    from modsat_core.specdoc import spec_markdown
+    from modsat_core.spec.doc import spec_markdown
 
     doc = Path(__file__).resolve().parents[2] / "docs" / "spec.md"
     assert doc.read_text() == spec_markdown(), "regenerate with: modsat schema --markdown > docs/spec.md"

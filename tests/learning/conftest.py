@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from modsat_core.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
-from modsat_core.spec import JobSpec
-from modsat_core.train import train
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
+from modsat_core.training.train import train
 
 
 def cpu_vendor() -> str:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from modsat_core.features import CellObs
-from modsat_core.flat_networks import MLPActor
-from modsat_core.layers import effort
-from modsat_core.spec import Training
-from modsat_core.td3 import TD3, TD3Config
+from modsat_core.agent.flat_networks import MLPActor
+from modsat_core.agent.layers import effort
+from modsat_core.agent.td3 import TD3, TD3Config
+from modsat_core.codesign.features import CellObs
+from modsat_core.spec.jobspec import Training
 
 
 class _FlatCritic(nn.Module):

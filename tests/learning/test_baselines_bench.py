@@ -7,11 +7,11 @@ import json
 
 import numpy as np
 
-from modsat_core.baselines import random_valid_designs, untrained_baselines
-from modsat_core.bench_learning import bench_learn, bench_rl_vs_ga, ga_spec_like
-from modsat_core.codesign_env import effective_invalid_penalty
+from modsat_core.bench.learning import bench_learn, bench_rl_vs_ga, ga_spec_like
+from modsat_core.codesign.mdp import effective_invalid_penalty
 from modsat_core.grid import is_valid
 from server.cli import main
+from tests.learning.baselines import random_valid_designs, untrained_baselines
 
 from .conftest import tiny_spec
 

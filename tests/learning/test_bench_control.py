@@ -7,11 +7,11 @@ import json
 import numpy as np
 import torch
 
-from modsat_core.bench_control import flat_attitude, flat_state
-from modsat_core.envs import reference_design
-from modsat_core.features import N_COMMON, N_DESIGN, PhysState, cell_observation
-from modsat_core.mission import draw_episode
-from modsat_core.slew import Design, SlewSim
+from modsat_core.codesign.features import N_COMMON, N_DESIGN, PhysState, cell_observation
+from modsat_core.sim.gym_envs import reference_design
+from modsat_core.sim.mission import draw_episode
+from modsat_core.sim.slew import Design, SlewSim
+from modsat_core.training.td3_control import flat_attitude, flat_state
 from server.cli import main
 
 

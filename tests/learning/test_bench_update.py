@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from modsat_core.bench_update import bench_update
+from modsat_core.bench.update import bench_update
 from server.cli import main
 
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from modsat_core.checkpoint import CHECKPOINT_VERSION, checkpoint_from_bytes, checkpoint_to_bytes
-from modsat_core.td3_run import TD3Run
+from modsat_core.training.checkpoint import CHECKPOINT_VERSION, checkpoint_from_bytes, checkpoint_to_bytes
+from modsat_core.training.td3_trainer import TD3Run
 
 
 class _Payload:

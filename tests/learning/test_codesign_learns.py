@@ -9,7 +9,7 @@ SIMD width) is another draw of the same recipe.
 
 Its final evaluation (32 seeded slews) must land at least `MIN_SUCCESS` of them. Measured
 against on the same slews: the same network untrained, flying its own design, and 8 random
-valid designs flown by that untrained controller (`modsat_core.baselines.untrained_baselines`),
+valid designs flown by that untrained controller (`tests.learning.baselines.untrained_baselines`),
 which land none (every slew breaks the rate limit or ends far off); and the PD baseline on the
 designed satellite, which lands all.
 """
@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import pytest
 
-from modsat_core.baselines import untrained_baselines
-from modsat_core.presets import get_preset
-from modsat_core.spec import parse_spec
-from modsat_core.train import train
+from modsat_core.spec.jobspec import parse_spec
+from modsat_core.spec.presets import get_preset
+from modsat_core.training.train import train
+from tests.learning.baselines import untrained_baselines
 
 from .conftest import on_the_measured_cpu
 

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import pytest
 
-from modsat_core.bench_control import bench_control
-from modsat_core.envs import reference_design
-from modsat_core.presets import get_preset
-from modsat_core.spec import parse_spec
+from modsat_core.sim.gym_envs import reference_design
+from modsat_core.spec.jobspec import parse_spec
+from modsat_core.spec.presets import get_preset
+from modsat_core.training.td3_control import bench_control
 
 from .conftest import on_the_measured_cpu
 

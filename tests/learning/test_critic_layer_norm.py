@@ -6,10 +6,10 @@ import pytest
 import torch
 from torch import nn
 
-from modsat_core.features import N_FEATURES, CellObs
-from modsat_core.flat_networks import MLPCritic
-from modsat_core.networks import NETWORKS, make_critic
-from modsat_core.td3_run import TD3Run
+from modsat_core.agent.flat_networks import MLPCritic
+from modsat_core.agent.networks import NETWORKS, make_critic
+from modsat_core.codesign.features import N_FEATURES, CellObs
+from modsat_core.training.td3_trainer import TD3Run
 
 from .conftest import tiny_spec
 

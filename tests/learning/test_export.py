@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import torch
 
-from modsat_core.evaluate import episode_rngs
-from modsat_core.features import N_FEATURES
-from modsat_core.mission import draw_episode
-from modsat_core.networks import NETWORKS, make_actor
-from modsat_core.policy import PolicyController, export_torchscript
-from modsat_core.slew import Design, SlewSim
+from modsat_core.agent.networks import NETWORKS, make_actor
+from modsat_core.agent.policy import PolicyController, export_torchscript
+from modsat_core.codesign.features import N_FEATURES
+from modsat_core.evaluation.monte_carlo import episode_rngs
+from modsat_core.sim.mission import draw_episode
+from modsat_core.sim.slew import Design, SlewSim
 
 from .conftest import tiny_spec
 
@@ -80,7 +80,7 @@ def test_a_crafted_policy_file_is_refused_without_running_it(tmp_path):
     import io
     import os
 
-    from modsat_core.policy_file import load_policy
+    from modsat_core.agent.policy_file import load_policy
 
     buf = io.BytesIO()
     torch.save({"format": "modsat-policy", "payload": _Payload()}, buf)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from modsat_core.features import (
+from modsat_core.codesign.features import (
     N_COMMON,
     N_DESIGN,
     N_FEATURES,

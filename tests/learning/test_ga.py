@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from modsat_core.ga import mutate, survivor_count
 from modsat_core.grid import is_valid
-from modsat_core.train import train
+from modsat_core.training.ga import mutate, survivor_count
+from modsat_core.training.train import train
 
 from .conftest import tiny_spec
 

@@ -9,14 +9,14 @@ import pytest
 import torch
 from pydantic import ValidationError
 
-from modsat_core.bench_control import bench_control
-from modsat_core.codesign_env import relabel_rows
-from modsat_core.envs import reference_design
-from modsat_core.mission import draw_episode, relabel
-from modsat_core.pd import PDController
-from modsat_core.slew import Design, SlewSim
-from modsat_core.td3_run import TD3Run
-from modsat_core.train import train
+from modsat_core.codesign.mdp import relabel_rows
+from modsat_core.sim.gym_envs import reference_design
+from modsat_core.sim.mission import draw_episode, relabel
+from modsat_core.sim.pd import PDController
+from modsat_core.sim.slew import Design, SlewSim
+from modsat_core.training.td3_control import bench_control
+from modsat_core.training.td3_trainer import TD3Run
+from modsat_core.training.train import train
 
 from .conftest import first_checkpoint, tiny_spec
 

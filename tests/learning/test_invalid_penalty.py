@@ -7,9 +7,9 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from modsat_core.codesign_env import CoDesignEnv, effective_invalid_penalty
-from modsat_core.mission import return_bounds
-from modsat_core.spec import JobSpec
+from modsat_core.codesign.mdp import CoDesignEnv, effective_invalid_penalty
+from modsat_core.sim.mission import return_bounds
+from modsat_core.spec.jobspec import JobSpec
 
 from .conftest import tiny_spec
 
@@ -68,10 +68,10 @@ def test_worst_valid_episodes_still_beat_an_invalid_one():
 
 
 def test_with_repair_every_grown_design_flies():
-    from modsat_core.features import N_FEATURES
+    from modsat_core.agent.networks import CellActor
+    from modsat_core.agent.policy import design_with
+    from modsat_core.codesign.features import N_FEATURES
     from modsat_core.grid import is_valid
-    from modsat_core.networks import CellActor
-    from modsat_core.policy import design_with
 
     spec = tiny_spec(design__repair=True)
     env = CoDesignEnv(spec, 16, seed=0)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from modsat_core.td3 import ReplayBuffer
+from modsat_core.agent.td3 import ReplayBuffer
 
 FIELDS = {
     "reward": ((), torch.float32),

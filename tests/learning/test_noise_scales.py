@@ -6,8 +6,8 @@ import math
 
 import torch
 
-from modsat_core.td3_run import TD3Run
-from modsat_core.train import train
+from modsat_core.training.td3_trainer import TD3Run
+from modsat_core.training.train import train
 
 from .conftest import first_checkpoint, tiny_spec
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from modsat_core.study_report import load_run, study, table_markdown
+from modsat_core.evaluation.study_report import load_run, study, table_markdown
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 

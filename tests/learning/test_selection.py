@@ -1,4 +1,4 @@
-"""The snapshot a run keeps (modsat_core/selection.py): the curve's k best, and the best of
+"""The snapshot a run keeps (modsat_core/evaluation/selection.py): the curve's k best, and the best of
 them on the validation slews."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import json
 import numpy as np
 import torch
 
-from modsat_core.policy import design_with
-from modsat_core.policy_file import new_actor
-from modsat_core.selection import keep, rank, validate
-from modsat_core.train import train
+from modsat_core.agent.policy import design_with
+from modsat_core.agent.policy_file import new_actor
+from modsat_core.evaluation.selection import keep, rank, validate
+from modsat_core.training.train import train
 
 
 def _point(env_steps: int, success: float, ret: float) -> dict:

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from modsat_core.artefacts import ArtefactError, DesignReport
+from modsat_core.evaluation.run_files import design_report
+from modsat_core.evaluation.study_report import held_curves, load_run, symmetry
 from modsat_core.grid import ACTUATOR, STRUCTURE
-from modsat_core.reports import design_report
-from modsat_core.study_report import held_curves, load_run, symmetry
 
 from .conftest import tiny_spec
 
@@ -159,7 +159,7 @@ def test_held_curves_wait_for_every_seed(runs):
 def test_a_figure_some_runs_lack_says_how_many_runs_it_is_over():
     """A run that landed no slew has no median slew time: the table says over how many runs the
     figure is, instead of a mean ± 0 that reads like every seed agreeing."""
-    from modsat_core.study_report import _mean_std, _pm
+    from modsat_core.evaluation.study_report import _mean_std, _pm
 
     assert _pm(_mean_std([3.93, None]), fmt="{:.2f}") == "3.93 ± 0.00 (1 of 2 runs)"
     assert _pm(_mean_std([1.0, 3.0])) == "2.0 ± 1.4"

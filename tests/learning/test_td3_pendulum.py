@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from modsat_core.td3 import TD3Config
-from modsat_core.td3_gym import train_gym
+from modsat_core.agent.td3 import TD3Config
+from tests.learning.td3_gym import train_gym
 
 pytestmark = pytest.mark.slow  # trains TD3 on Pendulum-v1
 

@@ -8,9 +8,9 @@ import math
 import pytest
 from pydantic import ValidationError
 
-from modsat_core.bench_control import bench_control
-from modsat_core.td3_run import TD3Run
-from modsat_core.train import train
+from modsat_core.training.td3_control import bench_control
+from modsat_core.training.td3_trainer import TD3Run
+from modsat_core.training.train import train
 
 from .conftest import first_checkpoint, tiny_spec
 

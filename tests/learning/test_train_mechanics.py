@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from modsat_core.checkpoint import (
+from modsat_core.agent.networks import NETWORKS
+from modsat_core.agent.policy_file import load_policy
+from modsat_core.agent.td3 import ReplayBuffer
+from modsat_core.grid import is_valid
+from modsat_core.training.checkpoint import (
     checkpoint_from_bytes,
     checkpoint_to_bytes,
     replay_buffer_bytes,
     replay_fields,
 )
-from modsat_core.grid import is_valid
-from modsat_core.networks import NETWORKS
-from modsat_core.policy_file import load_policy
-from modsat_core.td3 import ReplayBuffer
-from modsat_core.train import train
+from modsat_core.training.train import train
 
 from .conftest import tiny_spec
 
@@ -156,8 +156,8 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
     """`design_exploration_episodes`: an episode drawn as unexplored grows exactly the design
     the deterministic actor grows (no swaps, no noise); explored ones differ. So do all
     episodes while the design is held with `design_exploration_after_release`."""
-    from modsat_core.policy import design_with
-    from modsat_core.td3_run import TD3Run
+    from modsat_core.agent.policy import design_with
+    from modsat_core.training.td3_trainer import TD3Run
 
     def grown(share: float, **kw) -> tuple[list, np.ndarray]:
         spec = tiny_spec(
@@ -188,7 +188,7 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
 def test_design_layers_hold_until_design_learning_starts():
     """The set network's design layers do not move before `design_learning_starts`; the control
     layers do; and after it the design layers learn."""
-    from modsat_core.td3_run import TD3Run
+    from modsat_core.training.td3_trainer import TD3Run
 
     spec = tiny_spec(training__network="set", design__repair=True, training__design_learning_starts=10**6)
     run = TD3Run(spec)
@@ -208,7 +208,7 @@ def test_design_layers_hold_until_the_curve_lands_the_gate_share():
     """With `design_learning_after_success` the design layers stay held past
     `design_learning_starts` while no evaluation on the curve lands that share of its slews; one
     that does releases them, and a resumed run reads the gate's state back from the curve."""
-    from modsat_core.td3_run import TD3Run
+    from modsat_core.training.td3_trainer import TD3Run
 
     spec = tiny_spec(training__network="set", design__repair=True, training__design_learning_after_success=0.5)
     run = TD3Run(spec)
@@ -245,7 +245,7 @@ def test_design_layers_hold_until_the_curve_lands_the_gate_share():
 def _design_gap(run) -> float:
     """Mean squared distance between the actor's design actions and the replay's, over the
     design rows of a fixed sample of the run's replay buffer."""
-    from modsat_core.codesign_env import Compact, observe_compact
+    from modsat_core.codesign.mdp import Compact, observe_compact
 
     b = run.buffer.sample(512, torch.Generator().manual_seed(0))
     obs = observe_compact(
@@ -264,7 +264,7 @@ def test_design_bc_keeps_the_design_head_near_the_flown_designs():
     """`design_bc` (TD3+BC on the design head) pulls the design actions towards the replay's:
     the same run without it ends further from them (0.35 against 0.25 when written; the
     replay's own exploration noise sets the floor)."""
-    from modsat_core.td3_run import TD3Run
+    from modsat_core.training.td3_trainer import TD3Run
 
     gaps = {}
     for w in (0.0, 10.0):

@@ -8,7 +8,7 @@ import json
 import httpx
 import pytest
 
-from modsat_core.presets import PRESETS, get_preset
+from modsat_core.spec.presets import PRESETS, get_preset
 
 TINY = {"preset": "quick", "overrides": {"training": {"total_env_steps": 400}}}
 

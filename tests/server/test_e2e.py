@@ -62,7 +62,7 @@ def _read_events(base: str, job_id: int, out: list[tuple[str, str]]) -> None:
 def test_quick_preset_over_http(start_server, sqlite_url, spawn_worker):
     import torch
 
-    from modsat_core.policy_file import load_policy
+    from modsat_core.agent.policy_file import load_policy
 
     s = start_server(sqlite_url)
     spawn_worker(sqlite_url, "train")

@@ -9,7 +9,7 @@ import json
 import httpx
 import pytest
 
-from modsat_core.presets import get_preset
+from modsat_core.spec.presets import get_preset
 from server.settings import ServerSettings
 from tests.worker.helpers import wait_for
 

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 import torch
 
-from modsat_core.evaluate import monte_carlo
-from modsat_core.morphology import mass_properties
-from modsat_core.pd import PDController
-from modsat_core.presets import get_preset
-from modsat_core.slew import Design
-from modsat_core.spec import JobSpec
+from modsat_core.evaluation.monte_carlo import monte_carlo
+from modsat_core.sim.morphology import mass_properties
+from modsat_core.sim.pd import PDController
+from modsat_core.sim.slew import Design
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.presets import get_preset
 from server import cli
 
 pytestmark = pytest.mark.slow  # flies slews in Basilisk (about a minute)
@@ -55,7 +55,7 @@ def verify():
         "Basilisk.simulation.reactionWheelStateEffector",
         reason="Basilisk is not installed: pip install -e '.[basilisk]'",
     )
-    from modsat_core import verify
+    from modsat_core.verify.run import run as verify
 
     return verify
 
@@ -134,7 +134,7 @@ def trained_run(tmp_path_factory, verify):
     saturated, turns the satellite slowly enough to fly whole slews (not one step to the
     rate limit): the comparison then covers 120 control steps of closed loop.
     """
-    from modsat_core.train import train
+    from modsat_core.training.train import train
 
     d = get_preset("quick").model_dump(mode="json")
     d["modules"]["module_mass_kg"] = 100.0
@@ -223,7 +223,7 @@ def _files(run_dir, basilisk: bool) -> dict[str, bytes]:
 
 def test_a_run_that_asks_gets_verification_json(trained_run):
     """`evaluation.basilisk`: the worker and `modsat train` add the report to the run's files."""
-    from modsat_core.verify import ARTIFACT_NAME, add_verification
+    from modsat_core.verify.run import ARTIFACT_NAME, add_verification
 
     files = _files(trained_run, basilisk=False)
     assert not add_verification(files) and ARTIFACT_NAME not in files
@@ -235,7 +235,7 @@ def test_a_run_that_asks_gets_verification_json(trained_run):
 
 
 def test_a_run_that_asks_without_basilisk_says_so(monkeypatch, tmp_path):
-    from modsat_core import verify as v
+    from modsat_core.verify.run import run as v
 
     monkeypatch.setattr(v, "basilisk_available", lambda: False)
     files = {

@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from modsat_core.presets import get_preset
+from modsat_core.spec.presets import get_preset
 from tests.worker.helpers import wait_for
 
 from .conftest import (
@@ -162,7 +162,7 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     assert not re.search(r"\b1 actuators\b", table), table
     names = page.locator("#downloads a").all_text_contents()
     assert {"policy.pt", "policy_export.pt", "curve.json", "evaluation.viser", "verification.json"} <= set(names), names
-    # The same slews flown in Basilisk (modsat_core/verify.py), where the worker has it.
+    # The same slews flown in Basilisk (modsat_core/verify/run.py), where the worker has it.
     page.wait_for_selector("#verification h3")
     verification = page.text_content("#verification")
     if importlib.util.find_spec("Basilisk") is not None:

@@ -7,7 +7,7 @@ twice, and a thumbnail of each finished job's satellite in the list.
 No training runs here: one `modsat serve` without workers, and the jobs' histories written
 through the job store (worker/store.py, as a worker writes them), with files made through
 their models in modsat_core/artefacts.py (design.json, evaluation.json, curve.json), as
-modsat_core/reports.py's ``run_files`` makes them. The real pipeline's files are shown in
+modsat_core/evaluation/run_files.py's ``run_files`` makes them. The real pipeline's files are shown in
 test_flow.py."""
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ POLICY_CUBE = {
 
 
 def _design(grid) -> DesignReport:
-    """design.json as modsat_core.reports.design_report writes it (mass figures made up)."""
+    """design.json as modsat_core.evaluation.run_files.design_report writes it (mass figures made up)."""
     flat = [v for plane in grid for row in plane for v in row]
     return DesignReport.of(grid, mass_kg=2.0 * sum(v != 0 for v in flat), principal_inertia_kgm2=[0.01, 0.01, 0.01])
 

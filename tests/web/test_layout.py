@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from modsat_core.presets import get_preset
+from modsat_core.spec.presets import get_preset
 
 from .conftest import DESKTOP, PHONE, Serve, open_submit_form, screenshot_dir
 

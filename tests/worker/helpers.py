@@ -54,8 +54,8 @@ def spec_json(
     name: str | None = None,
 ) -> str:
     """A tiny valid JobSpec (the quick preset with a small budget)."""
-    from modsat_core.presets import get_preset
-    from modsat_core.spec import parse_spec
+    from modsat_core.spec.jobspec import parse_spec
+    from modsat_core.spec.presets import get_preset
 
     d = get_preset("quick").model_dump(mode="json")
     d["seed"] = seed

@@ -13,8 +13,8 @@ import signal
 
 import pytest
 
-from modsat_core.presets import get_preset
-from modsat_core.spec import parse_spec
+from modsat_core.spec.jobspec import parse_spec
+from modsat_core.spec.presets import get_preset
 from worker.store import JobStore
 
 from .helpers import pid_alive, spec_json, submit, wait_for
@@ -158,7 +158,7 @@ def test_sigterm_requeues_job_without_a_failure(store, db_url, spawn_worker):
 
 
 def test_kill9_during_real_training_resumes_from_its_checkpoint(sqlite_url, spawn_worker):
-    """The same recovery with modsat_core.train: its checkpoint bytes cross the pipe, land in the
+    """The same recovery with modsat_core.training.train: its checkpoint bytes cross the pipe, land in the
     database, and a new worker's training continues from them."""
     store = JobStore(sqlite_url)
     store.create_schema()

@@ -1,0 +1,135 @@
+"""Using a trained co-design actor: its design, its controller, and a standalone export."""
+
+from __future__ import annotations
+
+import io
+import warnings
+from typing import TYPE_CHECKING, cast
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from modsat_core.agent.networks import CellActor, SetActor
+from modsat_core.codesign.features import (
+    CONTROL_AT,
+    N_CONTROL_GLOBAL,
+    CellObs,
+    PhysState,
+    cell_observation,
+    control_globals,
+)
+from modsat_core.codesign.mdp import seed_grid
+from modsat_core.grid import ACTUATOR
+from modsat_core.sim.morphology import seed_component_batched
+from modsat_core.sim.slew import SlewSim
+from modsat_core.spec.jobspec import JobSpec
+
+
+@torch.no_grad()
+def design_with(actor: nn.Module, spec: JobSpec) -> np.ndarray:
+    """The grid the deterministic NCA grows from the seed module in ``design_steps`` steps."""
+    N, D = spec.design.grid_size, spec.design.design_steps
+    grid = torch.as_tensor(seed_grid(N)).unsqueeze(0)
+    phys = PhysState(torch.zeros(1, 4), torch.zeros(1, 4), torch.zeros(1, 3), torch.zeros(1, N**3, 3))
+    for d in range(D):
+        obs = cell_observation(grid, torch.tensor([d]), D, phys, spec.mission.rate_limit_rad_s)
+        grid = actor(obs).argmax(dim=-1).reshape(1, N, N, N)
+    if spec.design.repair:
+        grid = seed_component_batched(grid)
+    return grid[0].numpy().astype(np.int64)
+
+
+class PolicyController:
+    """Flies a fixed design with the actor's control head, for :func:`monte_carlo`.
+
+    The Monte-Carlo simulator packs wheel units in row-major cell order, the same order
+    as the actor's cells, so unit k is the k-th actuator cell.
+    """
+
+    def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
+        self.actor, self.spec = actor, spec
+        self.grid = torch.as_tensor(np.asarray(grid), dtype=torch.long)
+        self.N = self.grid.shape[0]
+        self.act_cells = torch.as_tensor(np.flatnonzero(np.asarray(grid).reshape(-1) == ACTUATOR))
+
+    def observation(self, sim: SlewSim) -> CellObs:
+        B, C = sim.B, self.N**3
+        h_cells = torch.zeros(B, C, 3)
+        h_cells[:, self.act_cells] = (sim.state.h_B / sim.h_scale_Nms).float()
+        phys = PhysState(sim.state.q_BN.float(), sim.q_TN.float(), sim.state.omega_B.float(), h_cells)
+        grids = self.grid.expand(B, self.N, self.N, self.N)
+        D = self.spec.design.design_steps
+        return cell_observation(grids, torch.full((B,), D), D, phys, self.spec.mission.rate_limit_rad_s)
+
+    def __call__(self, sim: SlewSim) -> Tensor:
+        with torch.no_grad():
+            a = self.actor(self.observation(sim))
+        return a[:, self.act_cells].to(sim.dtype)
+
+
+class ExportedController(nn.Module):
+    """A designed satellite's controller as a function of its state, needing only torch.
+
+    ``forward(q_BT, omega_B, h_B)``: error quaternion (B, 4) wxyz, body rate (B, 3) rad/s,
+    per-wheel-unit momentum (B, K, 3) N m s -> per-unit body torque command (B, K, 3) N m.
+    The design's constant per-cell features are baked in as buffers.
+    """
+
+    if TYPE_CHECKING:  # the buffers' types, for mypy only: TorchScript cannot read string annotations
+        base_x: Tensor
+        occupied: Tensor
+        act_cells: Tensor
+        act_mask: Tensor
+        value_mask: Tensor
+
+    def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
+        super().__init__()
+        N = np.asarray(grid).shape[0]
+        C = N**3
+        ctrl = PolicyController(actor, grid, spec)
+        # Constant part of the per-cell features: everything but the state-dependent slots.
+        probe = PhysState(
+            torch.tensor([[1.0, 0, 0, 0]]), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros(1, 3), torch.zeros(1, C, 3)
+        )
+        D = spec.design.design_steps
+        base = cell_observation(ctrl.grid.unsqueeze(0), torch.tensor([D]), D, probe, spec.mission.rate_limit_rad_s)
+        self.register_buffer("base_x", base.x[0].clone())
+        self.register_buffer("occupied", (ctrl.grid.reshape(-1) != 0).float().unsqueeze(-1))
+        self.register_buffer("act_cells", ctrl.act_cells.clone())
+        self.register_buffer("act_mask", (ctrl.grid.reshape(-1) == ACTUATOR).unsqueeze(0))
+        self.register_buffer("value_mask", (ctrl.grid.reshape(-1) != 0).unsqueeze(0))
+        self.c0 = CONTROL_AT
+        self.n_glob = N_CONTROL_GLOBAL
+        self.rate_limit = spec.mission.rate_limit_rad_s
+        self.tau_max = spec.modules.torque_scale_Nm
+        cap = spec.modules.momentum_capacity_Nms
+        self.h_scale = cap if cap is not None else spec.modules.torque_scale_Nm
+        self.actor = cast("CellActor | SetActor", actor)  # what make_actor builds; forward calls its .act
+
+    def forward(self, q_BT: Tensor, omega_B: Tensor, h_B: Tensor) -> Tensor:
+        B = q_BT.shape[0]
+        C = self.base_x.shape[0]
+        q = q_BT * torch.where(q_BT[:, :1] < 0, -1.0, 1.0)
+        glob = control_globals(q, omega_B, self.rate_limit)
+        x = self.base_x.unsqueeze(0).repeat(B, 1, 1)
+        h_cells = torch.zeros(B, C, 3, dtype=x.dtype)
+        h_cells[:, self.act_cells] = h_B.to(x.dtype) / self.h_scale
+        g0, g1 = self.c0, self.c0 + self.n_glob
+        x[:, :, g0:g1] = glob.unsqueeze(1).to(x.dtype) * self.occupied
+        x[:, :, g1 : g1 + 3] = h_cells * self.occupied
+        design = torch.zeros(B, dtype=torch.bool)
+        a = self.actor.act(x, self.act_mask.expand(B, C), self.value_mask.expand(B, C), design)
+        return a[:, self.act_cells] * self.tau_max
+
+
+def export_torchscript(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> bytes:
+    """TorchScript bytes of :class:`ExportedController` (load with ``torch.jit.load``)."""
+    with warnings.catch_warnings():
+        # TorchScript is deprecated in favour of torch.export but still the format that
+        # loads with one call (torch.jit.load) in any torch since 1.x; see docs/learning.md.
+        warnings.simplefilter("ignore", DeprecationWarning)
+        module = torch.jit.script(ExportedController(actor, grid, spec).eval())
+        buf = io.BytesIO()
+        torch.jit.save(module, buf)
+    return buf.getvalue()

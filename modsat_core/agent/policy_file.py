@@ -1,0 +1,85 @@
+"""``policy.pt``: the trained actor, its design and the run's spec, as a file users share.
+
+Read with ``torch.load(weights_only=True)``: tensors and plain data only.
+"""
+
+from __future__ import annotations
+
+import io
+import pickle
+
+import numpy as np
+import torch
+
+from modsat_core.agent.networks import make_actor
+from modsat_core.codesign.features import N_FEATURES
+from modsat_core.spec.jobspec import JobSpec
+
+#: Version 2: the network is named in the file (``per-module`` or ``set``), 53 features.
+POLICY_VERSION = 2
+
+
+def load_plain(data: bytes, what: str, allow: list | tuple = ()) -> object:
+    """``torch.load(weights_only=True)`` of a file a user can download or hand back: tensors and
+    plain data (and the ``allow``-ed globals) only; anything else is a ValueError naming ``what``."""
+    try:
+        with torch.serialization.safe_globals(list(allow)):
+            return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise ValueError(
+            f"not a modsat {what}: it holds objects other than tensors and plain data, which are "
+            f"not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}"
+        ) from None
+
+
+def new_actor(spec: JobSpec) -> torch.nn.Module:
+    """The co-design actor of a spec (``training.network``, ``hidden_sizes``, ``odd_control``)."""
+    t = spec.training
+    return make_actor(t.network, N_FEATURES, list(t.hidden_sizes), t.odd_control)
+
+
+def actor_from_state(spec: JobSpec, state: dict) -> torch.nn.Module:
+    """A CPU actor in eval mode holding ``state`` (a state dict of :func:`new_actor`'s actor)."""
+    actor = new_actor(spec)
+    actor.load_state_dict(state)
+    actor.eval()
+    return actor
+
+
+def policy_bytes(actor: torch.nn.Module, grid: np.ndarray | None, spec: JobSpec) -> bytes:
+    buf = io.BytesIO()
+    torch.save(
+        {
+            "format": "modsat-policy",
+            "version": POLICY_VERSION,
+            "spec": spec.model_dump(mode="json"),
+            "grid": None if grid is None else np.asarray(grid).tolist(),
+            "network": spec.training.network,
+            "hidden_sizes": list(spec.training.hidden_sizes),
+            "n_features": N_FEATURES,
+            "actor": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
+        },
+        buf,
+    )
+    return buf.getvalue()
+
+
+def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpec]:
+    """Read ``policy.pt``: the actor (CPU, eval mode), its design grid and the run's spec.
+
+    A policy file is downloaded and shared, so it is read with ``weights_only=True``: tensors
+    and plain data only; a pickle that would build other objects (and could run code) is
+    refused."""
+    d = load_plain(data, "policy file")
+    if not isinstance(d, dict) or d.get("format") != "modsat-policy":
+        raise ValueError("not a modsat policy file")
+    if d.get("version") != POLICY_VERSION or d.get("n_features") != N_FEATURES:
+        raise ValueError(
+            f"policy file version {d.get('version')} ({d.get('n_features')} features) is from an "
+            f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features): "
+            "train the run again"
+        )
+    spec = JobSpec.model_validate(d["spec"])
+    actor = actor_from_state(spec, d["actor"])
+    grid = None if d["grid"] is None else np.asarray(d["grid"], dtype=np.int64)
+    return actor, grid, spec

@@ -1,0 +1,1 @@
+"""Benchmarks (not tests): the simulator, one TD3 update, whole training runs."""

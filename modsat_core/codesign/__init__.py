@@ -1,0 +1,1 @@
+"""The co-design MDP (a design phase, then a control phase) and its per-cell observation features."""

@@ -1,0 +1,173 @@
+"""`JobSpec`: the one typed description of a modsat run.
+
+The API, the worker, the CLI and the web form all read and write this model. Every
+number is bounded, unknown keys are rejected (``extra="forbid"``), and
+:func:`parse_spec` turns pydantic's errors into messages that name the field, the value
+and the allowed range.
+
+Units are SI and are part of the field names where they matter (``_deg``, ``_Nm``...).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Literal
+
+from pydantic import Field, ValidationError, model_validator
+from pydantic_core import ErrorDetails
+
+from modsat_core.spec.sections import GA, DesignSpace, Evaluation, Mission, ModuleCatalog, RewardSpec, _Section
+from modsat_core.spec.training import Training
+
+__all__ = [
+    "GA",
+    "DesignSpace",
+    "Evaluation",
+    "JobSpec",
+    "Mission",
+    "ModuleCatalog",
+    "RewardSpec",
+    "SpecError",
+    "Training",
+    "UnrunnableSpec",
+    "format_errors",
+    "parse_spec",
+]
+
+SPEC_VERSION: Literal[1] = 1
+
+
+class JobSpec(_Section):
+    """A whole run: what to optimise, on which mission, with which budget."""
+
+    version: Literal[1] = SPEC_VERSION
+    name: str | None = Field(None, max_length=200, description="A label for people; not used by the run.")
+    algorithm: Literal["td3-codesign", "ga", "td3-control"] = Field(
+        "td3-codesign",
+        description="`td3-codesign`: NCA design + control by TD3 (paper). `ga`: GA over designs with TD3 "
+        "inner loops. `td3-control`: TD3 control of `design.fixed_design`.",
+    )
+    seed: int = Field(0, ge=0, le=2**31 - 1, description="Seeds networks, exploration and training slews.")
+    design: DesignSpace = Field(default_factory=DesignSpace)
+    modules: ModuleCatalog = Field(default_factory=ModuleCatalog)
+    mission: Mission = Field(default_factory=Mission)
+    training: Training = Field(default_factory=Training)
+    ga: GA = Field(default_factory=GA)
+    evaluation: Evaluation = Field(default_factory=Evaluation)
+
+    @model_validator(mode="after")
+    def _check_consistency(self) -> JobSpec:
+        if self.algorithm == "td3-control" and self.design.fixed_design is None:
+            raise ValueError("algorithm 'td3-control' needs design.fixed_design")
+        if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
+            raise ValueError("modules.momentum_capacity_Nms is only meaningful with actuator_model 'reaction-wheel'")
+        cone = self.training.hold_cone_start_deg
+        if cone is not None and cone < self.mission.tolerance_deg:
+            raise ValueError(
+                f"training.hold_cone_start_deg ({cone}) must be at least mission.tolerance_deg "
+                f"({self.mission.tolerance_deg}): the curriculum's cone shrinks to the tolerance"
+            )
+        if cone is not None and self.training.n_step > 1:
+            raise ValueError(
+                "training.hold_cone_start_deg works with one-step returns only (training.n_step 1): "
+                "an n-step return's rewards are summed in the buffer's sample, before they could be recomputed"
+            )
+        return self
+
+
+class UnrunnableSpec(ValueError):
+    """A valid spec that cannot run where it was sent (e.g. ``device: cuda`` without a GPU).
+    Retrying cannot help: a worker fails the job at once."""
+
+
+class SpecError(ValueError):
+    """A spec that failed validation; ``messages`` has one readable line per problem."""
+
+    def __init__(self, messages: list[str], errors: list[ErrorDetails] | None = None):
+        self.messages = messages
+        self.errors = errors or []
+        super().__init__("invalid spec:\n  " + "\n  ".join(messages))
+
+
+def _field_schema(loc: tuple[Any, ...]) -> dict[str, Any] | None:
+    """The JSON-schema node of the field at ``loc`` (resolving $refs), or None."""
+    schema = JobSpec.model_json_schema()
+    defs = schema.get("$defs", {})
+    node: dict[str, Any] = schema
+    for part in loc:
+        while "$ref" in node:
+            node = defs[node["$ref"].rsplit("/", 1)[-1]]
+        if "anyOf" in node:  # Optional[...]: take the non-null branch
+            node = next((n for n in node["anyOf"] if n.get("type") != "null"), node)
+            while "$ref" in node:
+                node = defs[node["$ref"].rsplit("/", 1)[-1]]
+        if isinstance(part, int):
+            if "items" in node:
+                node = node["items"]
+            elif "prefixItems" in node and part < len(node["prefixItems"]):
+                node = node["prefixItems"][part]
+            else:
+                return None
+        else:
+            props = node.get("properties", {})
+            if part not in props:
+                return None
+            node = props[part]
+    while "$ref" in node:
+        node = defs[node["$ref"].rsplit("/", 1)[-1]]
+    return node
+
+
+def _range_text(node: dict[str, Any]) -> str | None:
+    lo = node.get("minimum", node.get("exclusiveMinimum"))
+    hi = node.get("maximum", node.get("exclusiveMaximum"))
+    if lo is None and hi is None:
+        return None
+    lo_s = "" if lo is None else (f"> {lo}" if "exclusiveMinimum" in node else f">= {lo}")
+    hi_s = "" if hi is None else (f"< {hi}" if "exclusiveMaximum" in node else f"<= {hi}")
+    return " and ".join(s for s in (lo_s, hi_s) if s)
+
+
+def format_errors(exc: ValidationError) -> list[str]:
+    """One line per pydantic error: field path, offending value, and what is allowed."""
+    out = []
+    for err in exc.errors():
+        loc = tuple(p for p in err["loc"])
+        path = ".".join(str(p) for p in loc) or "(spec)"
+        kind = err["type"]
+        value = err.get("input")
+        if kind == "extra_forbidden":
+            parent = _field_schema(loc[:-1]) if len(loc) > 1 else JobSpec.model_json_schema()
+            allowed = sorted((parent or {}).get("properties", {}))
+            out.append(f"{path}: unknown field; allowed fields here: {', '.join(allowed)}")
+            continue
+        node = _field_schema(loc) if loc else None
+        rng = _range_text(node) if node else None
+        if kind in {"greater_than", "greater_than_equal", "less_than", "less_than_equal"} and rng:
+            out.append(f"{path}: {value!r} is out of range; allowed: {rng}")
+        elif kind == "literal_error":
+            out.append(f"{path}: {value!r} is not allowed; {err['msg'].lower()}")
+        elif kind == "value_error" or kind == "assertion_error":
+            msg = err["msg"].removeprefix("Value error, ")
+            out.append(f"{path}: {msg}")
+        else:
+            extra = f" (allowed: {rng})" if rng else ""
+            shown = repr(value) if not isinstance(value, dict) else "{...}"
+            out.append(f"{path}: {err['msg']}; got {shown}{extra}")
+    return out
+
+
+def parse_spec(data: dict[str, Any] | str | bytes) -> JobSpec:
+    """Validate a spec given as a dict or JSON text; raise :class:`SpecError` with readable messages."""
+    try:
+        if not isinstance(data, (str, bytes)):
+            try:
+                data = json.dumps(data, allow_nan=False)
+            except ValueError:
+                raise SpecError(["(spec): NaN and infinite numbers are not allowed"]) from None
+            except TypeError as exc:
+                raise SpecError([f"(spec): not a JSON document: {exc}"]) from None
+        # Strict: "3" is not the integer 3 and true is not 1 (JSON numbers are still floats).
+        return JobSpec.model_validate_json(data, strict=True)
+    except ValidationError as exc:
+        raise SpecError(format_errors(exc), exc.errors(include_url=False)) from None

@@ -1,0 +1,182 @@
+"""What a spec will cost a machine, and the limits a service (or the CLI) puts on it.
+
+Every field of a :class:`~modsat_core.spec.jobspec.JobSpec` is bounded on its own; combinations are
+not: a 10^3 grid with a 500,000-transition replay buffer needs 9.4 GiB before the first step,
+and 10,000 evaluation slews of a 10^3 grid fly in one batch of 10,000 x 1,000 cells. This
+module estimates a spec's peak memory and its work (env steps to train, control steps to
+evaluate) and says, naming the field to change, where a limit is exceeded. It imports no
+torch, so the API process can check a submission cheaply.
+
+The memory figure is an estimate, on the high side, of the largest allocations: the replay
+buffer (exact: the compact layout of ``train.replay_fields``), one TD3 update's activations
+(features of both states, every layer's output kept for the backward pass, actor, target
+actor and four critic passes), the per-step features of the training envs, and the
+Monte-Carlo evaluation's batch. docs/service.md ("Limits") lists the defaults.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from modsat_core.spec.jobspec import JobSpec
+
+#: Per-cell features (``features.N_FEATURES``; a test checks they agree).
+N_FEATURES = 53
+#: Per-cell encoder width of the set network (``networks.SET_CELL_WIDTH``; a test checks it).
+SET_CELL_WIDTH = 32
+#: Layer outputs kept per cell and wide layer in one TD3 update (forward and backward of the
+#: actor, the target actor, twin critics and twin target critics, the actor loss's critic pass).
+_UPDATE_PASSES = 10
+#: Working copies of the per-cell features while stepping or evaluating (features, network
+#: input, layer outputs).
+_STEP_COPIES = 4
+#: What a run needs besides the estimate above: the interpreter, torch, the simulator.
+BASE_BYTES = 600 * 2**20
+GIB = 2**30
+
+
+def transition_bytes(N: int) -> int:
+    """Bytes of one replay transition on an N^3 grid (two compact states, action, reward, terminal).
+
+    Per state: the grid (uint8 per cell), the design step (int16), q_BN, q_TN (4 float32 each),
+    omega (3 float32), the wheel momenta (3 float16 per cell); the action is 3 float16 per cell;
+    reward (float32), terminal and done (bool)."""
+    C = N**3
+    state = C + 2 + 16 + 16 + 12 + 6 * C
+    return 2 * state + 6 * C + 4 + 1 + 1
+
+
+def replay_capacity(spec: JobSpec) -> int:
+    """The transitions a run's buffer holds (as ``train.TD3Run`` allocates it)."""
+    t = spec.training
+    return min(t.buffer_size, max(t.total_env_steps, t.batch_size))
+
+
+@dataclass(frozen=True)
+class Estimate:
+    replay_bytes: int
+    update_bytes: int
+    step_bytes: int
+    evaluation_bytes: int
+    train_env_steps: int
+    evaluation_steps: int
+
+    @property
+    def memory_bytes(self) -> int:
+        return BASE_BYTES + self.replay_bytes + self.update_bytes + max(self.step_bytes, self.evaluation_bytes)
+
+    def as_dict(self) -> dict:
+        return {
+            "memory_bytes": self.memory_bytes,
+            "replay_bytes": self.replay_bytes,
+            "update_bytes": self.update_bytes,
+            "step_bytes": self.step_bytes,
+            "evaluation_bytes": self.evaluation_bytes,
+            "train_env_steps": self.train_env_steps,
+            "evaluation_steps": self.evaluation_steps,
+        }
+
+
+def estimate(spec: JobSpec) -> Estimate:
+    """Peak memory and work of a run of ``spec`` (see the module docstring)."""
+    t, m, e = spec.training, spec.mission, spec.evaluation
+    N = spec.design.grid_size
+    C = N**3
+    F = N_FEATURES
+    H = sum(t.hidden_sizes)
+    per_cell_width = H if t.network == "per-module" else SET_CELL_WIDTH
+    update = 4 * t.batch_size * (C * (2 * F + _UPDATE_PASSES * per_cell_width) + _UPDATE_PASSES * H)
+    step = 4 * t.num_envs * C * (F + 3) * _STEP_COPIES
+    evaluation = 4 * max(e.episodes, t.eval_episodes) * C * (F + 3) * _STEP_COPIES
+    # Curve points (one every eval_every_steps, and one at the end), then the final Monte-Carlo
+    # evaluation, flown by the policy and by the PD baseline.
+    curve_points = t.total_env_steps // t.eval_every_steps + 1
+    evaluation_steps = m.episode_steps * (curve_points * t.eval_episodes + 2 * e.episodes)
+    return Estimate(
+        replay_bytes=replay_capacity(spec) * transition_bytes(N),
+        update_bytes=update,
+        step_bytes=step,
+        evaluation_bytes=evaluation,
+        train_env_steps=t.total_env_steps,
+        evaluation_steps=evaluation_steps,
+    )
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What one run may use. ``None`` = no limit."""
+
+    max_memory_bytes: int | None = 8 * GIB
+    max_env_steps: int | None = 20_000_000
+    max_evaluation_steps: int | None = 50_000_000
+    max_trajectory_steps: int | None = 200_000
+
+
+def _gib(n: int) -> str:
+    return f"{n / GIB:.1f} GiB"
+
+
+def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
+    """Problems of ``spec`` under ``limits``: ``[(field path, message)]``, empty when it fits.
+
+    The path names the field that drives the exceeded figure most, so that an API client
+    (a 422 naming it) or a CLI user knows what to change."""
+    est = estimate(spec)
+    t, m, e = spec.training, spec.mission, spec.evaluation
+    out: list[tuple[tuple[str, ...], str]] = []
+    if limits.max_memory_bytes is not None and est.memory_bytes > limits.max_memory_bytes:
+        parts = {
+            ("training", "buffer_size"): est.replay_bytes,
+            ("training", "batch_size"): est.update_bytes,
+            ("training", "num_envs"): est.step_bytes,
+            ("evaluation", "episodes"): est.evaluation_bytes,
+        }
+        loc = max(parts, key=lambda k: parts[k])
+        out.append(
+            (
+                loc,
+                (
+                    f"{'.'.join(loc)}: this run would need about {_gib(est.memory_bytes)} of memory, more than this "
+                    f"service allows ({_gib(limits.max_memory_bytes)}, MODSAT_MAX_JOB_MEMORY_GIB): replay buffer "
+                    f"{_gib(est.replay_bytes)} ({replay_capacity(spec):,} transitions of a "
+                    f"{spec.design.grid_size}^3 grid), one update {_gib(est.update_bytes)} (batch {t.batch_size}), "
+                    f"stepping {_gib(est.step_bytes)} "
+                    f"({t.num_envs} envs), evaluation {_gib(est.evaluation_bytes)}; lower {'.'.join(loc)}"
+                ),
+            )
+        )
+    if limits.max_env_steps is not None and t.total_env_steps > limits.max_env_steps:
+        out.append(
+            (
+                ("training", "total_env_steps"),
+                (
+                    f"training.total_env_steps: {t.total_env_steps:,} is more than this service runs in one job "
+                    f"({limits.max_env_steps:,}, MODSAT_MAX_ENV_STEPS)"
+                ),
+            )
+        )
+    if limits.max_evaluation_steps is not None and est.evaluation_steps > limits.max_evaluation_steps:
+        curve = (t.total_env_steps // t.eval_every_steps + 1) * t.eval_episodes
+        loc = ("training", "eval_every_steps") if curve >= 2 * e.episodes else ("evaluation", "episodes")
+        out.append(
+            (
+                loc,
+                (
+                    f"{'.'.join(loc)}: the evaluations would fly {est.evaluation_steps:,} control steps "
+                    f"({curve:,} curve episodes and 2 x {e.episodes:,} final ones, {m.episode_steps:,} steps each), "
+                    f"more than this service allows ({limits.max_evaluation_steps:,}, MODSAT_MAX_EVALUATION_STEPS)"
+                ),
+            )
+        )
+    if limits.max_trajectory_steps is not None and e.trajectories * m.episode_steps > limits.max_trajectory_steps:
+        out.append(
+            (
+                ("evaluation", "trajectories"),
+                (
+                    f"evaluation.trajectories: {e.trajectories} recorded slews of {m.episode_steps:,} steps are "
+                    f"{e.trajectories * m.episode_steps:,} recorded steps, more than this service stores "
+                    f"({limits.max_trajectory_steps:,}, MODSAT_MAX_TRAJECTORY_STEPS)"
+                ),
+            )
+        )
+    return out

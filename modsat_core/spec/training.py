@@ -1,0 +1,291 @@
+"""The `training` section of a :class:`~modsat_core.spec.jobspec.JobSpec`: TD3's settings, the budget,
+and the schedules of exploration and of the design's learning (its own module, as the other
+sections are in :mod:`modsat_core.spec.sections`)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated, Any, Literal
+
+from pydantic import Field, field_validator
+
+from modsat_core.spec.sections import _Section
+
+if TYPE_CHECKING:  # validating a spec imports no torch (tests/core/test_layers.py)
+    from torch import Tensor
+
+
+class Training(_Section):
+    """TD3 hyper-parameters (paper table) and the run's budget."""
+
+    total_env_steps: int = Field(200_000, ge=1, le=1_000_000_000, description="Budget in control steps.")
+    num_envs: int = Field(16, ge=1, le=8192, description="Episodes simulated in parallel.")
+    network: Literal["per-module", "set"] = Field(
+        "per-module",
+        description=(
+            "`per-module`: the paper's network, its trunk run on every cell, per-cell twin critics "
+            "averaged. `set`: a small per-cell encoder, masked pooling over the satellite's cells, the "
+            "wide layers once per satellite, per-cell design and control heads (docs/learning.md)."
+        ),
+    )
+    hidden_sizes: list[Annotated[int, Field(ge=4, le=2048)]] = Field(
+        default_factory=lambda: [400, 300],
+        min_length=1,
+        max_length=4,
+        description="Wide layers: the shared trunk (`per-module`) or the per-satellite layers (`set`).",
+    )
+    actor_lr: float = Field(3e-4, gt=0.0, le=1.0, description="Adam learning rate of the shared actor.")
+    critic_lr: float = Field(3e-3, gt=0.0, le=1.0, description="Adam learning rate of the twin critics.")
+    batch_size: int = Field(512, ge=1, le=65536, description="Transitions per gradient update.")
+    buffer_size: int = Field(500_000, ge=100, le=10_000_000, description="Replay buffer capacity (transitions).")
+    gamma: float = Field(0.99, ge=0.0, lt=1.0, description="Discount factor.")
+    tau: float = Field(0.005, gt=0.0, le=1.0, description="Polyak factor (the paper's 0.995 written the other way).")
+    exploration_noise: float = Field(0.2, ge=0.0, le=2.0, description="Std of the Gaussian action noise.")
+    exploration_noise_final: float | None = Field(
+        None,
+        ge=0.0,
+        le=2.0,
+        description=(
+            "If set, the exploration noise falls linearly from `exploration_noise` (when learning "
+            "starts) to this value (at the end of the budget). null = constant noise (the paper)."
+        ),
+    )
+    exploration_noise_decay_steps: int | None = Field(
+        None,
+        ge=1,
+        le=1_000_000_000,
+        description=(
+            "Env steps (counted from `learning_starts`) over which the exploration noise falls to "
+            "`exploration_noise_final`, then stays there. null = over the whole budget."
+        ),
+    )
+    exploration_noise_min: float | None = Field(
+        None,
+        gt=0.0,
+        le=2.0,
+        description=(
+            "If set, each training episode draws its own noise std, log-uniformly between this and "
+            "the scheduled noise (FastTD3's per-environment noise scales, on a log scale): some "
+            "episodes explore widely while others fly near the deterministic policy and show the "
+            "critic the fine torques a hold needs. null = one std for every episode."
+        ),
+    )
+    lr_final_fraction: float | None = Field(
+        None,
+        gt=0.0,
+        le=1.0,
+        description=(
+            "If set, both learning rates fall linearly from their values (when learning starts) to "
+            "this fraction of them at the end of the budget: late updates fine-tune the policy "
+            "instead of moving it as far as the early ones. null = constant rates (the paper)."
+        ),
+    )
+    hold_cone_start_deg: float | None = Field(
+        None,
+        gt=0.0,
+        le=180.0,
+        description=(
+            "A tolerance curriculum: the reward's hold terms (the in-tolerance and settle bonuses, and "
+            "the progress penalty's exemption inside the cone) are paid inside a cone that starts at "
+            "this angle and shrinks geometrically to `mission.tolerance_deg` over `hold_cone_steps`. "
+            "Rewards are recomputed when a batch is sampled, so the replay follows the current cone; "
+            "success and every evaluation use the mission's tolerance. null = the mission's cone."
+        ),
+    )
+    hold_cone_steps: int | None = Field(
+        None,
+        ge=1,
+        le=1_000_000_000,
+        description=(
+            "Env steps (counted from `learning_starts`) over which the cone of `hold_cone_start_deg` "
+            "shrinks to the mission's tolerance, then stays there. null = over the whole budget."
+        ),
+    )
+    design_exploration: float = Field(
+        0.1, ge=0.0, le=1.0, description="Probability that a cell's design action is replaced by a random type."
+    )
+    design_exploration_episodes: float = Field(
+        1.0,
+        ge=0.0,
+        le=1.0,
+        description=(
+            "Share of episodes whose design phase is explored (random cell swaps and action noise), "
+            "drawn per episode. The others grow the policy's own design without noise, so that most "
+            "flights train the controller on the design being learned. 1 = every episode (the paper)."
+        ),
+    )
+    design_exploration_final: float | None = Field(
+        None,
+        ge=0.0,
+        le=1.0,
+        description=(
+            "If set, `design_exploration` falls linearly to this value over the budget, as the "
+            "exploration noise does: designs drawn widely while the controller learns to fly many "
+            "of them, then narrowed. null = constant."
+        ),
+    )
+    design_learning_starts: int = Field(
+        0,
+        ge=0,
+        le=1_000_000_000,
+        description=(
+            "Env steps before the actor's design layers learn: until then the policy grows the design "
+            "it starts from (the full cube around the seed actuator, with the set network) and the "
+            "controller learns to fly it and the explored designs near it. The design critic learns "
+            "from the start. 0 = from the start (the paper)."
+        ),
+    )
+    design_learning_after_success: float | None = Field(
+        None,
+        gt=0.0,
+        le=1.0,
+        description=(
+            "If set, the actor's design layers are also held until an evaluation on the learning "
+            "curve lands at least this share of its slews on the design being flown (and "
+            "`design_learning_starts` has passed): the design moves only once the controller can fly "
+            "the one it has. Once reached, the design learns to the end of the run. null = no gate."
+        ),
+    )
+    design_exploration_after_release: bool = Field(
+        False,
+        description=(
+            "If true, designs are explored (cell swaps and action noise in the design phase) only once "
+            "the actor's design layers learn (`design_learning_starts`, `design_learning_after_success`): "
+            "until then every flight is on the policy's own design, so the controller learns to fly one "
+            "satellite before it meets others. false = explored from the start."
+        ),
+    )
+    design_bc: float = Field(
+        0.0,
+        ge=0.0,
+        le=100.0,
+        description=(
+            "Weight of a behaviour-cloning term on the actor's design actions, as TD3+BC (Fujimoto "
+            "and Gu 2021): the squared distance between the design head's outputs and the design "
+            "actions in the replay, times the mean |Q| of the batch's design rows, is added to the "
+            "design rows' loss. It keeps the design head near the designs that have been flown, "
+            "where the critic has data, instead of following the critic to designs it has never "
+            "seen (e67: once released, the design went from 27 modules to 1 in 5k steps). 0 = off (the paper)."
+        ),
+    )
+    n_step: int = Field(
+        1,
+        ge=1,
+        le=20,
+        description=(
+            "Steps of reward summed before bootstrapping in the critic's target (n-step return, "
+            "stopping at the episode's end). 1 = the paper's one-step TD3."
+        ),
+    )
+    critic_layer_norm: bool = Field(
+        False,
+        description=(
+            "Layer normalisation before each ReLU of the critics' wide layers (as in "
+            "CrossQ, Bhatt et al. 2024, and FastTD3), against the critic's drift on the long "
+            "runs the paper's mission needs. false = the paper's critic."
+        ),
+    )
+    odd_control: bool = Field(
+        False,
+        description=(
+            "Make the control output odd in the attitude error and rates: torque = tanh((g(x) - "
+            "g(Px)) / 2), where P is the physical mirror of the state (the inverse error, the opposite "
+            "rate) and keeps everything else (wheel momentum, design, counts). A pointed, still "
+            "satellite then gets exactly zero torque whatever the weights, so a hold does not have "
+            "to cancel a learned bias to a fraction of a percent of full scale. Design outputs are "
+            "unchanged. false = the paper's actor."
+        ),
+    )
+    policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
+    policy_noise_final: float | None = Field(
+        None,
+        ge=0.0,
+        le=2.0,
+        description=(
+            "If set, the target smoothing std falls linearly from `policy_noise` (when learning "
+            "starts) to this value at the end of the budget: early on it steadies the critic, late "
+            "it would blur the small torques a hold needs (a 0.2 std kick is 0.03 rad/s per step on "
+            "the full 3x3x3 cube). null = constant (the paper)."
+        ),
+    )
+    noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
+    action_l2: float = Field(
+        0.0,
+        ge=0.0,
+        le=1000.0,
+        description=(
+            "Weight of the flight actions' squared torque commands (in [-1, 1], summed over the "
+            "actuators) added to the actor's loss, as HER's `action_l2` (Andrychowicz et al. 2017): it "
+            "keeps the policy out of tanh saturation so that it learns the small torques of a hold. "
+            "0 = off (the paper)."
+        ),
+    )
+    policy_delay: int = Field(2, ge=1, le=100, description="Critic updates per actor/target update.")
+    train_frequency: int = Field(2, ge=1, le=1000, description="Env steps between gradient updates.")
+    learning_starts: int = Field(10_000, ge=0, le=10_000_000)
+    eval_every_steps: int = Field(20_000, ge=1, le=1_000_000_000)
+    eval_episodes: int = Field(16, ge=1, le=1000, description="Episodes of each evaluation on the curve.")
+    select_top_k: int = Field(
+        1,
+        ge=1,
+        le=20,
+        description=(
+            "The final evaluation flies the curve's best snapshot (success, then return) or, above 1, "
+            "the best of the curve's k best on validation slews of their own seed, as many as "
+            '`evaluation.episodes` (docs/learning.md, "Outputs of a run"). 1 = the curve\'s best.'
+        ),
+    )
+    checkpoint_every_steps: int = Field(50_000, ge=1, le=1_000_000_000)
+    device: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` uses a GPU where torch sees one.")
+
+    def _schedule(self, start: float, final: float | None, env_steps: int, span: int | None = None) -> float:
+        if final is None:
+            return start
+        span = max(self.total_env_steps - self.learning_starts, 1) if span is None else span
+        frac = min(max((env_steps - self.learning_starts) / span, 0.0), 1.0)
+        return start + frac * (final - start)
+
+    @field_validator("buffer_size")
+    @classmethod
+    def _check_batch(cls, v: int, info: Any) -> int:
+        batch = info.data.get("batch_size")
+        if batch is not None and batch > v:
+            raise ValueError(
+                f"buffer_size ({v}) must be at least batch_size ({batch}): an update samples "
+                f"batch_size transitions from the buffer"
+            )
+        return v
+
+    def noise_at(self, env_steps: int) -> float:
+        """The exploration noise std after ``env_steps`` steps (see `exploration_noise_final`)."""
+        return self._schedule(
+            self.exploration_noise, self.exploration_noise_final, env_steps, self.exploration_noise_decay_steps
+        )
+
+    def policy_noise_at(self, env_steps: int) -> float:
+        """The target smoothing std after ``env_steps`` steps (see `policy_noise_final`)."""
+        return self._schedule(self.policy_noise, self.policy_noise_final, env_steps)
+
+    def lr_scale_at(self, env_steps: int) -> float:
+        """The factor on both learning rates after ``env_steps`` steps (see `lr_final_fraction`)."""
+        return self._schedule(1.0, self.lr_final_fraction, env_steps)
+
+    def hold_cone_deg(self, env_steps: int, tolerance_deg: float) -> float:
+        """The cone of the reward's hold terms after ``env_steps`` steps (see `hold_cone_start_deg`)."""
+        start = self.hold_cone_start_deg
+        if start is None:
+            return tolerance_deg
+        return start * (tolerance_deg / start) ** self._schedule(0.0, 1.0, env_steps, self.hold_cone_steps)
+
+    def noise_stds(self, env_steps: int, u: Tensor) -> Tensor:
+        """Per-episode noise stds for the episodes' draws ``u`` in [0, 1) (see `exploration_noise_min`)."""
+        import torch
+
+        top = self.noise_at(env_steps)
+        low = self.exploration_noise_min
+        if low is None or top <= low:
+            return torch.full_like(u, top)
+        return low * (top / low) ** u
+
+    def design_exploration_at(self, env_steps: int) -> float:
+        """The design exploration probability after ``env_steps`` steps."""
+        return self._schedule(self.design_exploration, self.design_exploration_final, env_steps)

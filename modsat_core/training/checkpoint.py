@@ -1,0 +1,147 @@
+"""The run contract's pieces: callbacks, the result, checkpoints and the replay layout.
+
+What :func:`modsat_core.training.train.train` takes and gives back (docs/train-interface.md), the
+checkpoint codec, and the compact layout of a replay-buffer row (shared by training, the
+memory limits and the tests).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from modsat_core.agent.policy_file import load_plain
+from modsat_core.spec.jobspec import UnrunnableSpec
+
+try:
+    from numpy._core import multiarray as np_multiarray  # numpy 2
+except ImportError:  # numpy 1
+    from numpy.core import multiarray as np_multiarray  # type: ignore[no-redef]
+
+ProgressFn = Callable[[dict], None]
+CheckpointFn = Callable[[dict], None]
+StopFn = Callable[[], bool]
+
+#: The replay buffer goes into checkpoints only up to this size (bigger buffers are refilled
+#: after a resume: learning restarts after ``learning_starts`` fresh transitions).
+CHECKPOINT_BUFFER_LIMIT_BYTES = 256 * 2**20
+CHECKPOINT_VERSION = 2
+
+
+def resolve_device(name: str) -> str:
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise UnrunnableSpec("training.device is 'cuda' but torch sees no GPU on this machine; use 'auto' or 'cpu'")
+    return name
+
+
+def checkpoint_to_bytes(ckpt: dict) -> bytes:
+    """A checkpoint as bytes that ``torch.load(weights_only=True)`` reads: tensors and plain
+    data (numpy arrays and scalars become lists and numbers)."""
+    buf = io.BytesIO()
+    torch.save(_plain(ckpt), buf)
+    return buf.getvalue()
+
+
+def checkpoint_from_bytes(data: bytes) -> dict:
+    """Read a checkpoint with ``torch.load(weights_only=True)``: a checkpoint can be downloaded
+    (``/api/jobs/{id}/artifacts/checkpoint.pt``) and handed back (``modsat train --resume``), so
+    a pickle that would build other objects (and could run code) is refused. Numpy integer
+    arrays, which checkpoints before this rule held (the best design's grid), are allowed."""
+    ckpt = load_plain(data, "checkpoint", allow=_NUMPY_ARRAYS)
+    if not isinstance(ckpt, dict):
+        raise ValueError("not a modsat checkpoint")
+    return ckpt
+
+
+#: What an older checkpoint's numpy grid needs from ``weights_only`` loading: the array
+#: constructor (under numpy 2's and numpy 1's module names) and the array and dtype types.
+_NUMPY_ARRAYS: list = [
+    np.ndarray,
+    np.dtype,
+    *(type(np.dtype(t)) for t in (np.int64, np.int8, np.float64)),
+    (np_multiarray._reconstruct, "numpy._core.multiarray._reconstruct"),
+    (np_multiarray._reconstruct, "numpy.core.multiarray._reconstruct"),
+]
+
+
+def _map_leaves(x, leaf):
+    """``x`` with ``leaf`` applied to everything that is not a dict, list or tuple."""
+    if isinstance(x, dict):
+        return {k: _map_leaves(v, leaf) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_map_leaves(v, leaf) for v in x]
+    if isinstance(x, tuple):
+        return tuple(_map_leaves(v, leaf) for v in x)
+    return leaf(x)
+
+
+def _plain(x):
+    """Numpy arrays and scalars as lists and numbers (what weights_only loading reads)."""
+
+    def leaf(v):
+        if isinstance(v, np.ndarray):
+            return v.tolist()
+        return v.item() if isinstance(v, np.generic) else v
+
+    return _map_leaves(x, leaf)
+
+
+def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
+    """The compact transition layout: two compact states, the action, reward, terminal, and
+    ``done`` (the episode ended there, also by its time limit: where n-step returns stop)."""
+    C = N**3
+    state = {
+        "grid": ((C,), torch.uint8),
+        "design_step": ((), torch.int16),
+        "q_BN": ((4,), torch.float32),
+        "q_TN": ((4,), torch.float32),
+        "omega_B": ((3,), torch.float32),
+        "h_cells": ((C, 3), torch.float16),
+    }
+    fields = {f"obs_{k}": v for k, v in state.items()}
+    fields.update({f"next_{k}": v for k, v in state.items()})
+    fields.update(
+        {
+            "action": ((C, 3), torch.float16),
+            "reward": ((), torch.float32),
+            "terminal": ((), torch.bool),
+            "done": ((), torch.bool),
+        }
+    )
+    return fields
+
+
+def replay_buffer_bytes(N: int, capacity: int) -> int:
+    """Memory of a full replay buffer of ``capacity`` transitions on an N^3 grid."""
+    return capacity * sum(
+        math.prod(shape) * torch.empty((), dtype=dt).element_size() for shape, dt in replay_fields(N).values()
+    )
+
+
+@dataclass
+class RunResult:
+    """What :func:`train` returns. ``artifacts()`` is empty for a stopped run."""
+
+    stopped: bool
+    env_steps: int
+    curve: list[dict] = field(default_factory=list)
+    files: dict[str, bytes] = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
+
+    def artifacts(self) -> dict[str, bytes]:
+        return dict(self.files)
+
+
+def to_cpu(x):
+    return _map_leaves(x, lambda v: v.detach().cpu() if isinstance(v, torch.Tensor) else v)
+
+
+def to_device(x, device):
+    return _map_leaves(x, lambda v: v.to(device) if isinstance(v, torch.Tensor) else v)
