@@ -3,8 +3,8 @@
     python docs/examples/pd_designs.py [PRESET] [EPISODES]
 
 PRESET's mission and modules (default cpu-3x3x3), the same seeded slews for every design;
-prints each design's modules, actuators, success and mean return (docs/learning.md,
-"Nineteenth round")."""
+prints each design's modules, actuators, success and mean return
+(docs/lab/2026-12-04-80k-budget-rate-margin-design-value.md)."""
 
 import sys
 

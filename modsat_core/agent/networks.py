@@ -154,7 +154,7 @@ class SetActor(nn.Module):
 
     Unlike the paper's shared trunk, the phases do not share layers, so that the design
     rows of a batch (a few percent, but with Q differences between designs of hundreds)
-    cannot pull the controller's layers around; docs/learning.md, "Fourth round", says
+    cannot pull the controller's layers around; docs/lab/2026-12-01-settle-bonus-set-network.md says
     what was measured with and without. The heads run on the acting cells only (every cell
     while designing, the actuators while flying).
     """

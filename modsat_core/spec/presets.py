@@ -29,11 +29,12 @@ _PAPER_TRAINING = {
 
 # The presets made for CPU budgets charge a rate-limit violation for the steps it skips,
 # so that spinning up to end the episode is never cheaper than holding still: with the
-# paper's fixed -50 that exit is a local optimum a short run falls into (docs/learning.md).
+# paper's fixed -50 that exit is a local optimum a short run falls into.
 _NO_EARLY_EXIT = {"safety_penalty_per_remaining_step": 1.0}
 
 
-# The CPU presets' recipe (docs/learning.md, "Fourth round"): the set network, wide and with
+# The CPU presets' TD3 recipe (docs/learning.md, "The shipped recipe", has one line of why per
+# key and the lab entry that measured it): the set network, wide and with
 # fast learning rates, one update per env step, exploration (actions and designs) falling to
 # zero over the budget, and a reward that pays holding still inside the cone instead of
 # charging it the progress penalty.
@@ -51,8 +52,7 @@ _CPU_TRAINING = {
     "design_exploration_episodes": 0.25,
     "device": "cpu",
 }
-# What lands the hold in co-design, on top of it (docs/learning.md, "Twelfth" to "Eighteenth
-# round"; each preset's comment has the runs): the actor's action penalty, a control output odd
+# What lands the hold in co-design, on top of it: the actor's action penalty, a control output odd
 # in the error and rates, the design held until the curve lands 75 % of its slews with no design
 # explored until then, and TD3+BC on the design head once it learns.
 _CODESIGN_HOLD = {
@@ -89,18 +89,13 @@ PRESETS: dict[str, JobSpec] = {
     "paper-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "td3-codesign"),
     "ga-3x3x3": _paper(3, PAPER_TAU_3X3X3_NM, "ga"),
     "ga-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "ga"),
-    # The demo mission: short episodes (120 steps), 30-90 deg slews, 1 deg, in about 10 minutes on
-    # one core. `cpu-3x3x3`'s recipe (the action penalty, the control output odd in the error and
-    # rates, the design held until the curve lands 75 % and no design explored until then, TD3+BC on
-    # the design head) over 15k env steps: seed 0 lands 91 of 100 slews at 1 deg after 9.4 min of
-    # training (q2s0, docs/learning.md "Eighteenth round"); seeds 1 and 2 land 61 % and 0 % of 100 in
-    # that budget (still learning the slew). The former recipe (60k steps, the design held 20k)
-    # landed seeds 0-2 at 88-100 % in about an hour.
+    # The demo mission: short episodes (120 steps), 30-90 deg slews, 1 deg, about 10 minutes of TD3
+    # co-design on one core (docs/learning.md, "Status", has what it lands).
     "quick": JobSpec.model_validate(
         {
             "name": "quick",
             "algorithm": "td3-codesign",
-            # Repair: every grown design flies (docs/learning.md: invalid designs starved short runs).
+            # Repair: every grown design flies (invalid designs starved short runs).
             "design": {"grid_size": 3, "repair": True},
             "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
             "mission": {
@@ -125,23 +120,10 @@ PRESETS: dict[str, JobSpec] = {
             "evaluation": {"episodes": 32},
         }
     ),
-    # The paper's 3x3x3 mission (500 steps, 30-150 deg, 0.25 deg) for a 2-core CPU. The actor's
-    # action penalty makes the hold settle (e47: 91 % on the fixed cube; 0 % without it before
-    # 140k); the design is held for 30k steps and then until the curve lands 75 % of its slews
-    # (e62, held by the step count alone: the design wandered, 0 %; e70, gated: 97 % of 100
-    # slews at 0.25 deg, seed 0, docs/learning.md "Twelfth round"). The control output odd in the
-    # error and rates (zero torque at the target) and no design explored while the design is held
-    # (the controller learns one satellite first) land seeds 0, 1, 2 at 99, 96, 84 % of 100 slews
-    # at 0.25 deg (e103; without them 97, 0, 30 %, "Seventeenth round"). Released without a trust
-    # region the design jumped to an unflyable one (return -549); TD3+BC on the design head
-    # (`design_bc` 0.4) keeps it flyable (e104s1: the full cube to the end, return 4,485-5,313
-    # after the release, "Eighteenth round"). Over 80k env steps with the curve every 5k (was 100k /
-    # 10k: the holds come at 20-65k and come and go between evaluations) seeds 0, 1, 2 land 88, 94,
-    # 93 % of 100 slews at 0.25 deg in 51 min each, two at a time (e106, "Nineteenth round"); the
-    # misses are slews over the rate limit by a hair. The curve's 32 slews cannot tell those
-    # snapshots from ones that land all 100: flying the curve's 4 best on 100 validation slews
-    # and keeping the best there (`select_top_k` 4; training unchanged) lands seeds 0-3 at 100,
-    # 92, 100, 100 % in 42-44 min ("Twenty-first round"). The design does not yet improve on the cube.
+    # The paper's 3x3x3 mission (500 steps, 30-150 deg, 0.25 deg) trained by TD3 co-design on a
+    # 2-core CPU in under an hour: the recipe above, the design held for 30k steps and then until
+    # the curve lands 75 % of its slews, the curve every 5k env steps and the best of its 4 best
+    # kept on validation slews (docs/learning.md, "The shipped recipe" and "Status").
     "cpu-3x3x3": JobSpec.model_validate(
         {
             "name": "cpu-3x3x3",

@@ -1,7 +1,7 @@
 """Co-design lands the slew: `quick` as shipped, success itself asserted.
 
 `quick` (the set network, `cpu-3x3x3`'s recipe, 15k env steps, seed 0) is run q2s0 of
-docs/learning.md, "Eighteenth round": 28 of its final 32 slews (1 deg and 0.01 rad/s at the
+docs/lab/2026-12-04-design-trust-region-quick-5x5x5.md: 28 of its final 32 slews (1 deg and 0.01 rad/s at the
 end of 120 steps) landed, 91 of 100 with `modsat eval`, after 9.4 min of training on one core.
 It is a regression check of that measured run, not a claim about every seed: seeds 1 and 2
 land 61 % and 0 % of 100 in this budget, and a machine with other floating point (another

@@ -5,7 +5,7 @@ the `quick` mission (30-90 deg slews, 1 deg and 0.01 rad/s at the end of 120 ste
 the CPU presets' recipe: the finer error and rate features, [256, 256], lr 1e-3, one update
 per env step, exploration noise falling to zero, and the hold reward (no progress penalty
 inside the cone, the settle bonus), 40k env steps, and the actor's action penalty
-(`training.action_l2` 10). docs/learning.md, "Tenth round" (e53-e55): on one torch thread, seed 0
+(`training.action_l2` 10). docs/lab/2026-12-03-action-penalty-quick-codesign.md (e53-e55): on one torch thread, seed 0
 lands 0, 3, 34, 88, 88, 94, 97 and 100 % of 32 slews at 5k-40k; seeds 1 and 2 reach 91 and
 94 % and end at 78 and 88 %. Without the penalty seed 0 ends at 12.5 % (its best) on one
 thread: the hold chatters through the rate tolerance. The untrained controller lands none,
