@@ -11,7 +11,7 @@ Each satellite keeps its own episode clock, so episodes can be reset independent
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -30,6 +30,13 @@ from modsat_core.sim.mission import (
 )
 from modsat_core.sim.morphology import mass_properties
 from modsat_core.spec.jobspec import Mission, ModuleCatalog
+
+
+def _put(x: Tensor, idx: Tensor, value: Tensor | float | int) -> Tensor:
+    """``x`` with rows ``idx`` set to ``value``, as a new tensor (``x`` is not written)."""
+    out = x.clone()
+    out[idx] = value
+    return out
 
 
 @dataclass
@@ -176,35 +183,91 @@ class SlewSim:
         return cls(np.stack([d.I_B for d in designs]), mask, mission, modules, **kw)
 
     def set_plants(self, idx: Tensor, I_B: Tensor, actuator_mask: Tensor) -> None:
-        """Replace the satellites ``idx`` (the learning code swaps designs between episodes)."""
+        """Replace the satellites ``idx`` (the learning code swaps designs between episodes).
+
+        Out of place, as :meth:`reset`: tensors a backward pass may still need are never written."""
         I_B = I_B.to(self.dtype)
-        self.plant.I_B[idx] = I_B
-        self.plant.I_B_inv[idx] = torch.linalg.inv(I_B)
-        self.plant.actuator_mask[idx] = actuator_mask
+        p = self.plant
+        self.plant = replace(
+            p,
+            I_B=_put(p.I_B, idx, I_B),
+            I_B_inv=_put(p.I_B_inv, idx, torch.linalg.inv(I_B)),
+            actuator_mask=_put(p.actuator_mask, idx, actuator_mask),
+        )
 
     # ------------------------------------------------------------------ reset / observe
     def reset(self, idx: Tensor | list[int], draws: list[EpisodeDraw]) -> None:
-        """Start new episodes for satellites ``idx`` (len b) from ``draws`` (len b)."""
+        """Start new episodes for satellites ``idx`` (len b) from ``draws`` (len b).
+
+        Every tensor is replaced, not written in place, so a reset between steps whose graph is
+        still to be backpropagated (the first-order learner) leaves that graph intact."""
         idx = torch.as_tensor(idx, dtype=torch.long, device=self.device)
         kw: dict[str, Any] = dict(dtype=self.dtype, device=self.device)
         st = self.state
         q_BN = torch.tensor(np.stack([d.q_BN for d in draws]), **kw)
-        st.q_BN[idx] = q_BN
-        st.omega_B[idx] = torch.tensor(np.stack([d.omega_B for d in draws]), **kw)
-        st.h_B[idx] = 0.0
-        st.t_s[idx] = 0.0
-        self.q_TN[idx] = torch.tensor(np.stack([d.q_TN for d in draws]), **kw)
-        self.plant.tau_residual_B[idx] = torch.tensor(np.stack([d.tau_residual_B for d in draws]), **kw)
-        self.plant.orbit_phase_rad[idx] = torch.tensor([d.orbit_phase_rad for d in draws], **kw)
-        self.steps[idx] = 0
+        self.state = dyn.State(
+            q_BN=_put(st.q_BN, idx, q_BN),
+            omega_B=_put(st.omega_B, idx, torch.tensor(np.stack([d.omega_B for d in draws]), **kw)),
+            h_B=_put(st.h_B, idx, 0.0),
+            t_s=_put(st.t_s, idx, 0.0),
+        )
+        self.q_TN = _put(self.q_TN, idx, torch.tensor(np.stack([d.q_TN for d in draws]), **kw))
+        self.plant = replace(
+            self.plant,
+            tau_residual_B=_put(
+                self.plant.tau_residual_B, idx, torch.tensor(np.stack([d.tau_residual_B for d in draws]), **kw)
+            ),
+            orbit_phase_rad=_put(
+                self.plant.orbit_phase_rad, idx, torch.tensor([d.orbit_phase_rad for d in draws], **kw)
+            ),
+        )
+        self.steps = _put(self.steps, idx, 0)
         q_e = error_quaternion(self.q_TN[idx], q_BN)
-        self.phi_prev[idx] = quat.error_angle(q_e)
+        self.phi_prev = _put(self.phi_prev, idx, quat.error_angle(q_e))
         self.metrics.reset(idx)
         theta, I_axis, tau_axis = slew_axis_properties(
-            q_e, self.plant.I_B[idx], self.plant.n_actuators[idx], self.plant.tau_max_Nm
+            q_e, self.plant.I_B[idx].detach(), self.plant.n_actuators[idx], self.plant.tau_max_Nm
         )
         self.metrics.theta0_rad[idx] = theta
         self.metrics.bound_s[idx] = eigenaxis_bound_s(theta, I_axis, tau_axis, self.mission.rate_limit_rad_s)
+
+    def detach(self) -> None:
+        """Cut the graph: the flight goes on from the same state, with no history behind it (the
+        first-order learner, between gradient windows)."""
+        st = self.state
+        self.state = dyn.State(st.q_BN.detach(), st.omega_B.detach(), st.h_B.detach(), st.t_s.detach())
+        self.phi_prev = self.phi_prev.detach()
+
+    def load_flight(self, d: dict[str, Tensor]) -> None:
+        """Restore the flights :meth:`flight_state` saved (a resumed first-order run)."""
+        kw: dict[str, Any] = dict(dtype=self.dtype, device=self.device)
+        self.state = dyn.State(
+            q_BN=d["q_BN"].to(**kw), omega_B=d["omega_B"].to(**kw), h_B=d["h_B"].to(**kw), t_s=d["t_s"].to(**kw)
+        )
+        self.q_TN = d["q_TN"].to(**kw)
+        self.steps = d["steps"].to(self.device)
+        self.phi_prev = d["phi_prev"].to(**kw)
+        self.plant = replace(
+            self.plant, tau_residual_B=d["tau_residual_B"].to(**kw), orbit_phase_rad=d["orbit_phase_rad"].to(**kw)
+        )
+        self.metrics.violated = d["violated"].to(self.device)
+
+    def flight_state(self) -> dict[str, Tensor]:
+        """What :meth:`load_flight` needs to continue these flights exactly (CPU tensors)."""
+        st, p = self.state, self.plant
+        out = {
+            "q_BN": st.q_BN,
+            "omega_B": st.omega_B,
+            "h_B": st.h_B,
+            "t_s": st.t_s,
+            "q_TN": self.q_TN,
+            "steps": self.steps,
+            "phi_prev": self.phi_prev,
+            "tau_residual_B": p.tau_residual_B,
+            "orbit_phase_rad": p.orbit_phase_rad,
+            "violated": self.metrics.violated,
+        }
+        return {k: v.detach().cpu().clone() for k, v in out.items()}
 
     def error_quaternion(self) -> Tensor:
         """(B, 4) ``q_BT`` with non-negative scalar part."""
@@ -235,11 +298,12 @@ class SlewSim:
         rew, in_tol, violated = reward(phi, self.phi_prev, omega_norm, m, m.episode_steps - self.steps)
         self.phi_prev = phi
         dt_c = m.control_dt_s
-        acc.ret += rew
-        acc.effort_Nms += tau_cmd.abs().sum(dim=(1, 2)) * dt_c
-        acc.peak_rate_rad_s = torch.maximum(acc.peak_rate_rad_s, omega_norm)
+        # The episode's metrics carry no graph: a differentiable flight backpropagates its own cost.
+        acc.ret += rew.detach()
+        acc.effort_Nms += tau_cmd.detach().abs().sum(dim=(1, 2)) * dt_c
+        acc.peak_rate_rad_s = torch.maximum(acc.peak_rate_rad_s, omega_norm.detach())
         acc.violated |= violated
-        acc.last_out_of_tol_s = torch.where(in_tol, acc.last_out_of_tol_s, self.state.t_s)
+        acc.last_out_of_tol_s = torch.where(in_tol, acc.last_out_of_tol_s, self.state.t_s.detach())
         truncated = (self.steps >= m.episode_steps) & ~violated
         out = StepOut(reward=rew, terminated=violated, truncated=truncated, phi_rad=phi, tau_c_B=tau_c)
         if bool((violated | truncated).any()):
