@@ -114,6 +114,8 @@ class CurvePoint(_Success):
     median_slew_time_ratio: float | None = None
     design_return: float | None = Field(None, description="GA: the mean return of the design just evaluated.")
     generation: int | None = Field(None, description="GA: the generation of that design.")
+    loss: float | None = Field(None, description="diffsim: the mean cost of the last update's window.")
+    grad_norm: float | None = Field(None, description="diffsim: the last update's gradient norm, before clipping.")
 
 
 class ProgressRecord(Record):
@@ -130,6 +132,8 @@ class ProgressRecord(Record):
     train_valid_rate: float | None = None
     train_success_rate: float | None = None
     critic_loss: float | None = None
+    loss: float | None = Field(None, description="diffsim: the mean cost of the last update's window.")
+    grad_norm: float | None = Field(None, description="diffsim: the last update's gradient norm, before clipping.")
     actor_loss: float | None = None
     q: float | None = None
     elapsed_s: float | None = Field(None, description="Added by the worker: run time of the job's attempts so far.")

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import io
 import warnings
+from collections.abc import Callable
 from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import torch
 from torch import Tensor, nn
 
+from modsat_core.agent.diffsim_policy import DiffsimController, DiffsimPolicy, ExportedDiffsimController
 from modsat_core.agent.networks import CellActor, SetActor
 from modsat_core.codesign.features import (
     CONTROL_AT,
@@ -123,13 +125,28 @@ class ExportedController(nn.Module):
         return a[:, self.act_cells] * self.tau_max
 
 
+def controller_for(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> Callable[[SlewSim], Tensor]:
+    """What flies ``grid`` with ``actor`` in :func:`~modsat_core.evaluation.monte_carlo.monte_carlo`:
+    the first-order learner's controller or the co-design actor's control head."""
+    if isinstance(actor, DiffsimPolicy):
+        return DiffsimController(actor, spec.mission.rate_limit_rad_s)
+    return PolicyController(actor, grid, spec)
+
+
+def exported(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> nn.Module:
+    """The standalone controller of ``actor`` flying ``grid``: ``forward(q_BT, omega_B, h_B)``."""
+    if isinstance(actor, DiffsimPolicy):
+        return ExportedDiffsimController(actor, grid, spec.mission.rate_limit_rad_s, spec.modules.torque_scale_Nm)
+    return ExportedController(actor, grid, spec)
+
+
 def export_torchscript(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> bytes:
-    """TorchScript bytes of :class:`ExportedController` (load with ``torch.jit.load``)."""
+    """TorchScript bytes of :func:`exported` (load with ``torch.jit.load``)."""
     with warnings.catch_warnings():
         # TorchScript is deprecated in favour of torch.export but still the format that
         # loads with one call (torch.jit.load) in any torch since 1.x; see docs/learning.md.
         warnings.simplefilter("ignore", DeprecationWarning)
-        module = torch.jit.script(ExportedController(actor, grid, spec).eval())
+        module = torch.jit.script(exported(actor, grid, spec).eval())
         buf = io.BytesIO()
         torch.jit.save(module, buf)
     return buf.getvalue()

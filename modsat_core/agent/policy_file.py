@@ -11,6 +11,7 @@ import pickle
 import numpy as np
 import torch
 
+from modsat_core.agent.diffsim_policy import DIFFSIM_NETWORK, N_DIFFSIM_INPUTS, DiffsimPolicy
 from modsat_core.agent.networks import make_actor
 from modsat_core.codesign.features import N_FEATURES
 from modsat_core.spec.jobspec import JobSpec
@@ -32,8 +33,23 @@ def load_plain(data: bytes, what: str, allow: list | tuple = ()) -> object:
         ) from None
 
 
+def is_diffsim(spec: JobSpec) -> bool:
+    """Whether the spec's policy is the first-order learner's controller (else TD3's actor)."""
+    return spec.algorithm == "diffsim-control"
+
+
+def network_of(spec: JobSpec) -> tuple[str, list[int], int]:
+    """The network a spec's policy is: its name in ``policy.pt``, its widths and its inputs."""
+    if is_diffsim(spec):
+        return DIFFSIM_NETWORK, list(spec.diffsim.hidden_sizes), N_DIFFSIM_INPUTS
+    return spec.training.network, list(spec.training.hidden_sizes), N_FEATURES
+
+
 def new_actor(spec: JobSpec) -> torch.nn.Module:
-    """The co-design actor of a spec (``training.network``, ``hidden_sizes``, ``odd_control``)."""
+    """The policy network of a spec: the first-order learner's controller (``diffsim.hidden_sizes``)
+    or the co-design actor (``training.network``, ``hidden_sizes``, ``odd_control``)."""
+    if is_diffsim(spec):
+        return DiffsimPolicy(list(spec.diffsim.hidden_sizes))
     t = spec.training
     return make_actor(t.network, N_FEATURES, list(t.hidden_sizes), t.odd_control)
 
@@ -47,6 +63,7 @@ def actor_from_state(spec: JobSpec, state: dict) -> torch.nn.Module:
 
 
 def policy_bytes(actor: torch.nn.Module, grid: np.ndarray | None, spec: JobSpec) -> bytes:
+    network, hidden, n_inputs = network_of(spec)
     buf = io.BytesIO()
     torch.save(
         {
@@ -54,9 +71,9 @@ def policy_bytes(actor: torch.nn.Module, grid: np.ndarray | None, spec: JobSpec)
             "version": POLICY_VERSION,
             "spec": spec.model_dump(mode="json"),
             "grid": None if grid is None else np.asarray(grid).tolist(),
-            "network": spec.training.network,
-            "hidden_sizes": list(spec.training.hidden_sizes),
-            "n_features": N_FEATURES,
+            "network": network,
+            "hidden_sizes": hidden,
+            "n_features": n_inputs,
             "actor": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
         },
         buf,
@@ -73,11 +90,11 @@ def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpe
     d = load_plain(data, "policy file")
     if not isinstance(d, dict) or d.get("format") != "modsat-policy":
         raise ValueError("not a modsat policy file")
-    if d.get("version") != POLICY_VERSION or d.get("n_features") != N_FEATURES:
+    if d.get("version") != POLICY_VERSION or d.get("n_features") not in (N_FEATURES, N_DIFFSIM_INPUTS):
         raise ValueError(
             f"policy file version {d.get('version')} ({d.get('n_features')} features) is from an "
-            f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features): "
-            "train the run again"
+            f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features, or "
+            f"{N_DIFFSIM_INPUTS} inputs for {DIFFSIM_NETWORK}): train the run again"
         )
     spec = JobSpec.model_validate(d["spec"])
     actor = actor_from_state(spec, d["actor"])

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from modsat_core.agent.policy import PolicyController, export_torchscript
+from modsat_core.agent.policy import controller_for, export_torchscript
 from modsat_core.agent.policy_file import policy_bytes
 from modsat_core.artefacts import CurveFile, CurvePoint, DesignReport, EvaluationReport, RunSummary, Trajectories
 from modsat_core.codesign.mdp import effective_invalid_penalty
@@ -47,7 +47,7 @@ def evaluate_design(
         return None
     return monte_carlo(
         Design.from_grid(grid, spec.modules),
-        PolicyController(actor, grid, spec),
+        controller_for(actor, grid, spec),
         spec.mission,
         spec.modules,
         episodes=episodes,
@@ -119,7 +119,7 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
         return out
     design = Design.from_grid(grid, spec.modules)
     kw: dict[str, Any] = dict(episodes=n, seed=ev.seed, record=min(ev.trajectories, n), dtype=torch.float64)
-    mc = monte_carlo(design, PolicyController(actor, grid, spec), spec.mission, spec.modules, **kw)
+    mc = monte_carlo(design, controller_for(actor, grid, spec), spec.mission, spec.modules, **kw)
     pd = monte_carlo(design, PDController, spec.mission, spec.modules, **kw)
     out["policy"] = {"summary": mc.summary(tols), "episodes": mc.episodes}
     out["pd_baseline"] = {"summary": pd.summary(tols), "episodes": pd.episodes}

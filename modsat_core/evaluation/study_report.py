@@ -26,7 +26,12 @@ from modsat_core.artefacts import ArtefactError, CurveFile, DesignReport, Evalua
 from modsat_core.grid import ACTUATOR, EMPTY, describe
 from modsat_core.spec.jobspec import JobSpec, parse_spec
 
-LABELS = {"td3-codesign": "RL co-design", "ga": "GA", "td3-control": "TD3 (fixed design)"}
+LABELS = {
+    "td3-codesign": "RL co-design",
+    "ga": "GA",
+    "td3-control": "TD3 (fixed design)",
+    "diffsim-control": "first-order (fixed design)",
+}
 FILES = ("spec.json", "curve.json", "design.json", "evaluation.json")
 
 

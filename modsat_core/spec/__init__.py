@@ -6,6 +6,7 @@ studies, its schema page. Torch-free.
 from modsat_core.spec.jobspec import (
     GA,
     DesignSpace,
+    Diffsim,
     Evaluation,
     JobSpec,
     Mission,
@@ -21,6 +22,7 @@ from modsat_core.spec.jobspec import (
 __all__ = [
     "GA",
     "DesignSpace",
+    "Diffsim",
     "Evaluation",
     "JobSpec",
     "Mission",

@@ -68,7 +68,7 @@ def spec_markdown() -> str:
         lines.append("")
 
     table("JobSpec", schema)
-    for name in ("DesignSpace", "ModuleCatalog", "Mission", "RewardSpec", "Training", "GA", "Evaluation"):
+    for name in ("DesignSpace", "ModuleCatalog", "Mission", "RewardSpec", "Training", "GA", "Evaluation", "Diffsim"):
         table(name, defs[name])
     lines.extend(
         [

@@ -16,12 +16,14 @@ from typing import Any, Literal
 from pydantic import Field, ValidationError, model_validator
 from pydantic_core import ErrorDetails
 
+from modsat_core.spec.diffsim import Diffsim
 from modsat_core.spec.sections import GA, DesignSpace, Evaluation, Mission, ModuleCatalog, RewardSpec, _Section
 from modsat_core.spec.training import Training
 
 __all__ = [
     "GA",
     "DesignSpace",
+    "Diffsim",
     "Evaluation",
     "JobSpec",
     "Mission",
@@ -42,10 +44,11 @@ class JobSpec(_Section):
 
     version: Literal[1] = SPEC_VERSION
     name: str | None = Field(None, max_length=200, description="A label for people; not used by the run.")
-    algorithm: Literal["td3-codesign", "ga", "td3-control"] = Field(
+    algorithm: Literal["td3-codesign", "ga", "td3-control", "diffsim-control"] = Field(
         "td3-codesign",
         description="`td3-codesign`: NCA design + control by TD3 (paper). `ga`: GA over designs with TD3 "
-        "inner loops. `td3-control`: TD3 control of `design.fixed_design`.",
+        "inner loops. `td3-control`: TD3 control of `design.fixed_design`. `diffsim-control`: control of "
+        "`design.fixed_design` learned by backpropagating a mission cost through the simulator (`diffsim`).",
     )
     seed: int = Field(0, ge=0, le=2**31 - 1, description="Seeds networks, exploration and training slews.")
     design: DesignSpace = Field(default_factory=DesignSpace)
@@ -54,11 +57,12 @@ class JobSpec(_Section):
     training: Training = Field(default_factory=Training)
     ga: GA = Field(default_factory=GA)
     evaluation: Evaluation = Field(default_factory=Evaluation)
+    diffsim: Diffsim = Field(default_factory=Diffsim)
 
     @model_validator(mode="after")
     def _check_consistency(self) -> JobSpec:
-        if self.algorithm == "td3-control" and self.design.fixed_design is None:
-            raise ValueError("algorithm 'td3-control' needs design.fixed_design")
+        if self.algorithm in ("td3-control", "diffsim-control") and self.design.fixed_design is None:
+            raise ValueError(f"algorithm {self.algorithm!r} needs design.fixed_design")
         if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
             raise ValueError("modules.momentum_capacity_Nms is only meaningful with actuator_model 'reaction-wheel'")
         cone = self.training.hold_cone_start_deg

@@ -30,6 +30,11 @@ _UPDATE_PASSES = 10
 #: Working copies of the per-cell features while stepping or evaluating (features, network
 #: input, layer outputs).
 _STEP_COPIES = 4
+#: Bytes the graph of a first-order (`diffsim-control`) update keeps per training slew and RK4 step,
+#: and per control step (the controller's layers, the cost): measured on a 3x3x3 design with 1 and 3
+#: wheel units, B = 1024 and 2048, 16 steps of 5 substeps (1.4 and 0.9 KB), rounded up.
+DIFFSIM_BYTES_PER_SUBSTEP = 1536
+DIFFSIM_BYTES_PER_STEP = 2048
 #: What a run needs besides the estimate above: the interpreter, torch, the simulator.
 BASE_BYTES = 600 * 2**20
 GIB = 2**30
@@ -92,6 +97,18 @@ def estimate(spec: JobSpec) -> Estimate:
     # evaluation, flown by the policy and by the PD baseline.
     curve_points = t.total_env_steps // t.eval_every_steps + 1
     evaluation_steps = m.episode_steps * (curve_points * t.eval_episodes + 2 * e.episodes)
+    if spec.algorithm == "diffsim-control":  # no replay, no per-cell features: one window's graph
+        d = spec.diffsim
+        substeps = m.frame_skip if d.substeps is None else d.substeps
+        window = d.batch_size * d.window_steps * (substeps * DIFFSIM_BYTES_PER_SUBSTEP + DIFFSIM_BYTES_PER_STEP)
+        return Estimate(
+            replay_bytes=0,
+            update_bytes=window,
+            step_bytes=0,
+            evaluation_bytes=evaluation,
+            train_env_steps=t.total_env_steps,
+            evaluation_steps=evaluation_steps,
+        )
     return Estimate(
         replay_bytes=replay_capacity(spec) * transition_bytes(N),
         update_bytes=update,
@@ -124,7 +141,21 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
     est = estimate(spec)
     t, m, e = spec.training, spec.mission, spec.evaluation
     out: list[tuple[tuple[str, ...], str]] = []
-    if limits.max_memory_bytes is not None and est.memory_bytes > limits.max_memory_bytes:
+    if limits.max_memory_bytes is not None and est.memory_bytes > limits.max_memory_bytes and est.replay_bytes == 0:
+        d = spec.diffsim
+        loc = ("diffsim", "batch_size") if est.update_bytes >= est.evaluation_bytes else ("evaluation", "episodes")
+        out.append(
+            (
+                loc,
+                (
+                    f"{'.'.join(loc)}: this run would need about {_gib(est.memory_bytes)} of memory, more than this "
+                    f"service allows ({_gib(limits.max_memory_bytes)}, MODSAT_MAX_JOB_MEMORY_GIB): one gradient "
+                    f"window {_gib(est.update_bytes)} ({d.batch_size} slews x {d.window_steps} steps), evaluation "
+                    f"{_gib(est.evaluation_bytes)}; lower {'.'.join(loc)}"
+                ),
+            )
+        )
+    elif limits.max_memory_bytes is not None and est.memory_bytes > limits.max_memory_bytes:
         parts = {
             ("training", "buffer_size"): est.replay_bytes,
             ("training", "batch_size"): est.update_bytes,

@@ -207,6 +207,10 @@ class TD3Run:
         self.agent.schedule(self.t, self.env_steps)
         self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount, actor_rows)
 
+    @property
+    def updates(self) -> int:
+        return self.agent.updates
+
     def design_released(self) -> bool:
         """Whether the actor's design layers learn: after `design_learning_starts` env steps and,
         with `design_learning_after_success`, once an evaluation on the curve has landed that

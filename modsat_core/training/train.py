@@ -13,6 +13,7 @@ that would), so it may end up to ``num_envs - 1`` steps short of it.
 
 from __future__ import annotations
 
+from modsat_core.agent.policy_file import is_diffsim
 from modsat_core.artefacts import ProgressRecord
 from modsat_core.evaluation.run_files import run_files
 from modsat_core.spec.jobspec import JobSpec
@@ -25,6 +26,7 @@ from modsat_core.training.checkpoint import (
     resolve_device,
     to_device,
 )
+from modsat_core.training.diffsim import DiffsimRun
 from modsat_core.training.ga import GARun
 from modsat_core.training.td3_trainer import TD3Run
 
@@ -57,7 +59,7 @@ def train(
             on_progress, on_checkpoint, should_stop, checkpoint
         )
     device = resolve_device(spec.training.device)
-    run = TD3Run(spec, device=device)
+    run: TD3Run | DiffsimRun = DiffsimRun(spec, device=device) if is_diffsim(spec) else TD3Run(spec, device=device)
     if checkpoint is not None:
         run.load_state_dict(to_device(checkpoint["run"], device))
 
@@ -73,7 +75,7 @@ def train(
         ProgressRecord(
             env_steps=run.env_steps,
             total_env_steps=spec.training.total_env_steps,
-            updates=run.agent.updates,
+            updates=run.updates,
             phase="evaluating",
             eval=None,
         ).to_dict()

@@ -1,0 +1,234 @@
+"""`diffsim-control`: a controller learned by backpropagating a mission cost through the simulator.
+
+The batched :class:`~modsat_core.sim.slew.SlewSim` is torch from end to end, so the cost of a
+stretch of flight is a differentiable function of the controller's weights. Each update flies
+``diffsim.batch_size`` slews for ``window_steps`` control steps with the controller in the loop,
+backpropagates the window's cost through every step (short-horizon backpropagation through time,
+as SHAC does without its critic), clips the gradient's norm and takes an Adam step; the state is
+then detached and the next window continues the same flights. Slews end after ``episode_steps``
+control steps or a rate-limit violation, at a window's end, and new ones are drawn.
+
+Cost of a step, from the state after it (phi: error angle, w: |omega_B|, both smoothed near zero)::
+
+    phi + rate_weight w + angle_log_weight log(1 + phi / angle_log_scale_rad)
+        + rate_log_weight log(1 + w / rate_log_scale_rad_s) + barrier_weight relu(w - w_b)^2
+
+with ``w_b = rate_barrier_fraction * rate_limit``. The log terms keep a gradient pulling into
+the tolerance cone and to rest where the linear terms are flat; the window's last step counts
+``terminal_weight`` extra times. Training flies a coarser integrator (``diffsim.substeps`` RK4
+steps per control step; the control interval is the mission's); the curve and the final
+evaluation fly the mission's own physics.
+
+The budget (``training.total_env_steps``) counts control steps flown in training: one update is
+``batch_size * window_steps`` of them. docs/diffsim.md has the settings and the measurements.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from modsat_core.agent.diffsim_policy import DiffsimController, DiffsimPolicy
+from modsat_core.agent.policy_file import actor_from_state
+from modsat_core.artefacts import ProgressRecord
+from modsat_core.evaluation.run_files import curve_point
+from modsat_core.evaluation.selection import keep, validate
+from modsat_core.sim.mission import draw_episode
+from modsat_core.sim.slew import Design, SlewSim
+from modsat_core.spec.diffsim import Diffsim
+from modsat_core.spec.jobspec import JobSpec, Mission
+from modsat_core.training.checkpoint import CheckpointFn, ProgressFn, StopFn, to_cpu
+
+
+def training_mission(mission: Mission, substeps: int | None) -> Mission:
+    """The mission flown in training: the same control interval on ``substeps`` RK4 steps."""
+    if substeps is None or substeps == mission.frame_skip:
+        return mission
+    return mission.model_copy(update={"physics_dt_s": mission.control_dt_s / substeps, "frame_skip": substeps})
+
+
+def _smooth_norm(v: Tensor, eps: float = 1e-8) -> Tensor:
+    return torch.sqrt((v * v).sum(dim=-1) + eps)
+
+
+def step_cost(sim: SlewSim, d: Diffsim) -> Tensor:
+    """(B,) cost of the satellites' current state (see the module docstring)."""
+    q = sim.error_quaternion()
+    phi = 2.0 * torch.atan2(_smooth_norm(q[:, 1:]), q[:, 0])
+    w = _smooth_norm(sim.state.omega_B)
+    barrier = d.rate_barrier_fraction * sim.mission.rate_limit_rad_s
+    return (
+        phi
+        + d.rate_weight * w
+        + d.angle_log_weight * torch.log1p(phi / d.angle_log_scale_rad)
+        + d.rate_log_weight * torch.log1p(w / d.rate_log_scale_rad_s)
+        + d.barrier_weight * torch.relu(w - barrier) ** 2
+    )
+
+
+def window_loss(sim: SlewSim, controller: DiffsimController, d: Diffsim) -> Tensor:
+    """Fly ``window_steps`` control steps from the sim's state and return the window's mean cost
+    (a scalar with the graph of every step)."""
+    total = torch.zeros((), dtype=sim.dtype, device=sim.device)
+    cost = total
+    for _ in range(d.window_steps):
+        sim.step(controller(sim))
+        cost = step_cost(sim, d)
+        total = total + cost.mean()
+    return (total + d.terminal_weight * cost.mean()) / (d.window_steps + d.terminal_weight)
+
+
+class DiffsimRun:
+    """One `diffsim-control` run: the controller, its optimiser, the training flights, the curve."""
+
+    def __init__(self, spec: JobSpec, device: str = "cpu"):
+        assert spec.design.fixed_design is not None  # the spec's validator requires it
+        self.spec, self.d, self.t, self.device = spec, spec.diffsim, spec.training, device
+        torch.manual_seed(spec.seed)
+        self.policy = DiffsimPolicy(list(self.d.hidden_sizes)).to(device)
+        self.controller = DiffsimController(self.policy, spec.mission.rate_limit_rad_s)
+        self.opt = torch.optim.Adam(self.policy.parameters(), lr=self.d.lr)
+        self.grid = np.asarray(spec.design.fixed_design, dtype=np.int64)
+        B = self.d.batch_size
+        self.sim = SlewSim.from_designs(
+            [Design.from_grid(self.grid, spec.modules)] * B,
+            training_mission(spec.mission, self.d.substeps),
+            spec.modules,
+            dtype=torch.float32,
+            device=device,
+        )
+        self.rng = np.random.default_rng([spec.seed, 1])
+        W, T = self.d.window_steps, self.d.episode_steps
+        # Staggered first slews: row i's first slew ends after a random whole number of windows,
+        # so that later windows hold slews at every stage.
+        windows = max(1, math.ceil(T / W))
+        self.ep_steps = torch.as_tensor(self.rng.integers(0, windows, size=B) * W, dtype=torch.long)
+        self.sim.reset(list(range(B)), [draw_episode(self.rng, spec.mission) for _ in range(B)])
+        self.env_steps = 0
+        self.updates = 0
+        self.curve: list[dict] = []
+        self.kept: list[dict] = []
+        self.last: dict[str, float] = {}
+        self.next_eval = self.t.eval_every_steps
+        self.next_ckpt = self.t.checkpoint_every_steps
+
+    # ------------------------------------------------------------------ schedule
+    @property
+    def steps_per_update(self) -> int:
+        return self.d.batch_size * self.d.window_steps
+
+    @property
+    def total_updates(self) -> int:
+        return max(1, self.t.total_env_steps // self.steps_per_update)
+
+    def lr(self, update: int) -> float:
+        """Cosine from ``lr`` to ``lr_final`` over the run's updates."""
+        frac = min(1.0, update / max(1, self.total_updates - 1))
+        return self.d.lr_final + 0.5 * (self.d.lr - self.d.lr_final) * (1.0 + math.cos(math.pi * frac))
+
+    # ------------------------------------------------------------------ one update
+    def update(self) -> dict[str, float]:
+        for group in self.opt.param_groups:
+            group["lr"] = self.lr(self.updates)
+        self.policy.train()
+        loss = window_loss(self.sim, self.controller, self.d)
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = float(torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.d.grad_clip))
+        self.opt.step()
+        self.sim.detach()
+        self.updates += 1
+        self.env_steps += self.steps_per_update
+        self.ep_steps += self.d.window_steps
+        ended = (self.ep_steps >= self.d.episode_steps) | self.sim.metrics.violated.cpu()
+        idx = torch.nonzero(ended).flatten()
+        if len(idx):
+            self.sim.reset(idx.tolist(), [draw_episode(self.rng, self.spec.mission) for _ in range(len(idx))])
+            self.ep_steps[idx] = 0
+        self.last = {"loss": float(loss.detach()), "grad_norm": grad_norm}
+        return self.last
+
+    # ------------------------------------------------------------------ the run
+    def run(self, on_progress: ProgressFn, on_checkpoint: CheckpointFn, should_stop: StopFn) -> bool:
+        """Train to the end of the budget; True if stopped by ``should_stop`` (after a checkpoint)."""
+        total = self.t.total_env_steps
+        while self.env_steps + self.steps_per_update <= total:
+            if should_stop():
+                on_checkpoint(self.state_dict())
+                return True
+            self.update()
+            point = None
+            last = self.env_steps + self.steps_per_update > total
+            if self.env_steps >= self.next_eval or last:
+                point = self.evaluate_now()
+                self.next_eval = (self.env_steps // self.t.eval_every_steps + 1) * self.t.eval_every_steps
+            on_progress(self.progress(point))
+            if self.env_steps >= self.next_ckpt and not last:
+                on_checkpoint(self.state_dict())
+                self.next_ckpt = (self.env_steps // self.t.checkpoint_every_steps + 1) * self.t.checkpoint_every_steps
+        if not self.kept:  # a budget smaller than one update: the untrained controller
+            on_progress(self.progress(self.evaluate_now()))
+        return False
+
+    def evaluate_now(self) -> dict:
+        """A learning-curve point: a CPU copy of the controller on the curve's slews (the mission's
+        physics), and the last update's cost and gradient norm."""
+        policy = copy.deepcopy(self.policy).cpu().eval()
+        point = curve_point(policy, self.grid, self.spec, self.env_steps, self.updates, 0.0)
+        point.update(self.last)
+        self.curve.append(point)
+        self.kept = keep(self.kept, point, policy, self.grid, self.t.select_top_k)
+        return point
+
+    def progress(self, point: dict | None) -> dict:
+        out = {
+            "env_steps": self.env_steps,
+            "total_env_steps": self.t.total_env_steps,
+            "updates": self.updates,
+            "phase": "training",
+            "eval": point,
+            **self.last,
+        }
+        return ProgressRecord.model_validate(out).to_dict()
+
+    def chosen(self) -> tuple[torch.nn.Module, np.ndarray, dict]:
+        """The controller the final evaluation flies (as TD3's: the curve's best, or the best of its
+        top ``select_top_k`` on validation slews), its design and the record of the choice."""
+        snapshot, scores = validate(self.kept, self.spec)
+        extra: dict = {"best_env_steps": snapshot["env_steps"]}
+        if scores:
+            extra["selection"] = scores
+        return actor_from_state(self.spec, snapshot["actor"]), self.grid, extra
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_dict(self) -> dict:
+        return {
+            "env_steps": self.env_steps,
+            "updates": self.updates,
+            "next_eval": self.next_eval,
+            "next_ckpt": self.next_ckpt,
+            "curve": copy.deepcopy(self.curve),
+            "kept": self.kept,
+            "last": dict(self.last),
+            "policy": to_cpu(self.policy.state_dict()),
+            "opt": to_cpu(self.opt.state_dict()),
+            "rng": self.rng.bit_generator.state,
+            "ep_steps": self.ep_steps.clone(),
+            "sim": self.sim.flight_state(),
+        }
+
+    def load_state_dict(self, d: dict) -> None:
+        self.env_steps, self.updates = d["env_steps"], d["updates"]
+        self.next_eval, self.next_ckpt = d["next_eval"], d["next_ckpt"]
+        self.curve, self.kept, self.last = list(d["curve"]), list(d["kept"]), dict(d["last"])
+        for s in self.kept:  # the grid is a list in a checkpoint's bytes (weights_only loading)
+            s["grid"] = np.asarray(s["grid"], dtype=np.int64)
+        self.policy.load_state_dict(d["policy"])
+        self.opt.load_state_dict(d["opt"])
+        self.rng.bit_generator.state = d["rng"]
+        self.ep_steps = torch.as_tensor(d["ep_steps"], dtype=torch.long)
+        self.sim.load_flight(d["sim"])
