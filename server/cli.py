@@ -103,11 +103,41 @@ def _cmd_bench_control(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_learners(args: argparse.Namespace) -> int:
+    _set_threads(None)
+    from modsat_core.bench.learners import DESIGNS, DIFFSIM_STEPS, bench_learners
+
+    unknown = [d for d in args.designs if d not in DESIGNS]
+    if unknown:
+        raise SystemExit(f"modsat bench learners: unknown design {unknown[0]!r}; known: {', '.join(DESIGNS)}")
+    steps = DIFFSIM_STEPS if args.steps is None else args.steps
+    if steps < 1:
+        raise SystemExit("modsat bench learners: --steps must be at least 1")
+    if args.out:
+        if os.path.isdir(args.out):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    rows = bench_learners(args.seeds, args.designs, steps, td3=not args.no_td3, log=lambda r: _log(json.dumps(r)))
+    if args.json:
+        _print_report(rows, args.out)
+    else:
+        if args.out:
+            with open(args.out, "w") as fh:
+                fh.write(json.dumps(rows, indent=2) + "\n")
+        for r in rows:
+            print(
+                f"{r['learner']:8s} {r['design']:15s} seed {r['seed']!s:5s} train {r['train_s']!s:>6s} s  "
+                f"success@0.25 {100 * r['success_rate_at_0.25_deg']:5.1f} %  settle {r['median_settling_time_s']} s "
+                f"(PD {r['pd_median_settling_time_s']} s)  violations {r['safety_violations']}"
+            )
+    return 0
+
+
 def _log(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-def _print_report(report: dict, path: str | None) -> None:
+def _print_report(report: dict | list, path: str | None) -> None:
     """A benchmark's JSON report on stdout and, if ``path``, in that file."""
     text = json.dumps(report, indent=2)
     if path:
@@ -485,6 +515,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bc.add_argument("--out", help="also write the JSON report to this file")
     bc.set_defaults(func=_cmd_bench_control, device=None)
+
+    bl2 = bsub.add_parser(
+        "learners",
+        help="diffsim (first-order), TD3 at the same wall time, and PD on the same designs and 100 slews",
+    )
+    bl2.add_argument("--json", action="store_true", help="print the rows as a JSON list")
+    bl2.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="seeds (default 0 1 2 3 4)")
+    bl2.add_argument(
+        "--designs", nargs="+", default=["cube", "three-actuator"], help="designs (default cube three-actuator)"
+    )
+    bl2.add_argument("--steps", type=int, help="diffsim env steps per run (default 240 updates: 1,966,080)")
+    bl2.add_argument("--no-td3", action="store_true", help="leave out the TD3 rows")
+    bl2.add_argument("--out", help="also write the rows (JSON) to this file")
+    bl2.set_defaults(func=_cmd_bench_learners, threads=None)
 
     pr = sub.add_parser("presets", help="list the named presets, or print one as JSON")
     pr.add_argument("name", nargs="?")

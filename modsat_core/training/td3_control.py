@@ -43,6 +43,8 @@ _CURVE_KEYS = (
     "median_final_error_deg",
     "median_final_rate_rad_s",
     "median_slew_time_ratio",
+    "median_settling_time_s",
+    "max_peak_rate_rad_s",
 )
 
 
@@ -68,10 +70,16 @@ class _Controller:
 
 
 def bench_control(
-    spec: JobSpec, *, eval_every: int = 5_000, eval_target: bool = False, log: Callable[[str], None] | None = None
+    spec: JobSpec,
+    *,
+    eval_every: int = 5_000,
+    eval_target: bool = False,
+    log: Callable[[str], None] | None = None,
+    max_wall_s: float | None = None,
 ) -> dict:
     """Train and evaluate; returns the curve and the cost (JSON-ready). ``eval_target``: each
-    evaluation also flies the target actor (TD3's Polyak average of the actor), as ``"target"``."""
+    evaluation also flies the target actor (TD3's Polyak average of the actor), as ``"target"``.
+    ``max_wall_s``: stop once training (evaluations not counted) has taken this long."""
     m, t = spec.mission, spec.training
     grid = (
         np.asarray(spec.design.fixed_design)
@@ -126,8 +134,12 @@ def bench_control(
                 f"{p['median_final_rate_rad_s']:.4f} rad/s"
             )
 
+    eval_s = 0.0
+
     def evaluate() -> dict:
-        point: dict = {"env_steps": steps, "updates": agent.updates, "wall_s": round(time.monotonic() - t0, 1)}
+        nonlocal eval_s
+        e0 = time.monotonic()
+        point: dict = {"env_steps": steps, "updates": agent.updates, "wall_s": round(e0 - t0, 1)}
         point.update(fly(agent.actor))
         say("", point)
         if eval_target:
@@ -135,9 +147,13 @@ def bench_control(
             point["target"] = target
             say(" (target actor)", {**point, **target})
         curve.append(point)
+        eval_s += time.monotonic() - e0
         return point
 
-    while steps + B <= t.total_env_steps:
+    def out_of_time() -> bool:
+        return max_wall_s is not None and time.monotonic() - t0 - eval_s >= max_wall_s
+
+    while steps + B <= t.total_env_steps and not out_of_time():
         o = flat_state(sim)
         if steps < t.learning_starts:
             a = torch.rand((B, act_dim), generator=gen) * 2.0 - 1.0
@@ -167,6 +183,7 @@ def bench_control(
         if steps >= next_eval:
             evaluate()
             next_eval += eval_every
+    train_s = time.monotonic() - t0 - eval_s
     if not curve or curve[-1]["env_steps"] != steps:
         evaluate()
     pd = monte_carlo(
@@ -179,6 +196,7 @@ def bench_control(
         "hidden_sizes": hidden,
         "seed": spec.seed,
         "wall_s": round(time.monotonic() - t0, 1),
+        "train_s": round(train_s, 1),
         "env_steps": steps,
         "updates": agent.updates,
         "threads": torch.get_num_threads(),
