@@ -70,6 +70,18 @@ _HOLD_REWARD = {
 }
 
 
+#: The full 3x3x3 cube of structure modules, its centre module the one wheel unit.
+_CUBE_3 = [[[1, 1, 1], [1, 1, 1], [1, 1, 1]], [[1, 1, 1], [1, 2, 1], [1, 1, 1]], [[1, 1, 1], [1, 1, 1], [1, 1, 1]]]
+#: The demo mission: short episodes (120 control steps, 10 s), 30-90 deg slews, 1 deg.
+_QUICK_MISSION = {
+    "episode_steps": 120,
+    "slew_min_deg": 30.0,
+    "slew_max_deg": 90.0,
+    "tolerance_deg": 1.0,
+    "reward": _HOLD_REWARD,
+}
+
+
 def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
     return JobSpec.model_validate(
         {
@@ -89,22 +101,35 @@ PRESETS: dict[str, JobSpec] = {
     "paper-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "td3-codesign"),
     "ga-3x3x3": _paper(3, PAPER_TAU_3X3X3_NM, "ga"),
     "ga-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "ga"),
-    # The demo mission: short episodes (120 steps), 30-90 deg slews, 1 deg, about 10 minutes of TD3
-    # co-design on one core (docs/learning.md, "Status", has what it lands).
+    # The demo, what a newcomer tries first: the full cube flown by the first-order learner on a
+    # short mission (120 control steps, 30-90 deg slews, 1 deg), 100 updates: about a minute on one
+    # core (docs/diffsim.md has what it lands).
     "quick": JobSpec.model_validate(
         {
             "name": "quick",
+            "algorithm": "diffsim-control",
+            "design": {"grid_size": 3, "fixed_design": _CUBE_3},
+            "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
+            "mission": _QUICK_MISSION,
+            "training": {
+                "total_env_steps": 100 * 256 * 32,
+                "eval_every_steps": 25 * 256 * 32,
+                "eval_episodes": 32,
+                "checkpoint_every_steps": 50 * 256 * 32,
+                "device": "cpu",
+            },
+        }
+    ),
+    # `quick`'s mission by TD3 co-design, about 10 minutes on one core (docs/learning.md, "Status",
+    # has what it lands): the TD3 demo, and the spec of the service's and viewer's tests.
+    "quick-td3": JobSpec.model_validate(
+        {
+            "name": "quick-td3",
             "algorithm": "td3-codesign",
             # Repair: every grown design flies (invalid designs starved short runs).
             "design": {"grid_size": 3, "repair": True},
             "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
-            "mission": {
-                "episode_steps": 120,
-                "slew_min_deg": 30.0,
-                "slew_max_deg": 90.0,
-                "tolerance_deg": 1.0,
-                "reward": _HOLD_REWARD,
-            },
+            "mission": _QUICK_MISSION,
             "training": {
                 **_CPU_TRAINING,
                 **_CODESIGN_HOLD,

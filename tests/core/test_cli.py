@@ -100,14 +100,14 @@ def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     a_file = tmp_path / "file"
     a_file.write_text("")
     for args in (
-        ["train", "--preset", "quick", "--out", str(a_file)],
-        ["bench", "learn", "--preset", "quick", "--out", str(a_file / "sub")],
+        ["train", "--preset", "quick-td3", "--out", str(a_file)],
+        ["bench", "learn", "--preset", "quick-td3", "--out", str(a_file / "sub")],
     ):
         r = modsat(*args)
         assert r.returncode == 2 and str(a_file) in r.stderr and "Traceback" not in r.stderr
-    r = modsat("bench", "rl-vs-ga", "--preset", "quick", "--seeds", "0", "-4")
+    r = modsat("bench", "rl-vs-ga", "--preset", "quick-td3", "--seeds", "0", "-4")
     assert r.returncode == 2 and "seed: -4 is out of range" in r.stderr
-    r = modsat("bench", "rl-vs-ga", "--preset", "quick", "--population", "1")
+    r = modsat("bench", "rl-vs-ga", "--preset", "quick-td3", "--population", "1")
     assert r.returncode == 2 and "ga.population_size" in r.stderr
     r = modsat("bench", "rl-vs-ga", "--preset", "ga-3x3x3")
     assert r.returncode != 0 and "td3-codesign" in r.stderr

@@ -14,7 +14,7 @@ from modsat_core.spec.presets import PRESETS, get_preset
 
 
 def _spec(**sections):
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     for k, v in sections.items():
         d[k] = {**d[k], **v} if isinstance(v, dict) else v
     return parse_spec(d)
@@ -57,7 +57,7 @@ def test_check_cli_is_readable(tmp_path):
     from server.cli import main
 
     path = tmp_path / "big.json"
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     d["design"]["grid_size"] = 10
     d["training"].update(buffer_size=500_000, total_env_steps=1_000_000)
     path.write_text(json.dumps(d))
@@ -65,5 +65,5 @@ def test_check_cli_is_readable(tmp_path):
         main(["check", str(path)])
     assert exc.value.code == 2
     ok = tmp_path / "ok.json"
-    ok.write_text(get_preset("quick").model_dump_json())
+    ok.write_text(get_preset("quick-td3").model_dump_json())
     assert main(["check", str(ok)]) == 0

@@ -1,6 +1,6 @@
-"""Co-design lands the slew: `quick` as shipped, success itself asserted.
+"""Co-design lands the slew: `quick-td3` (TD3 co-design on the demo mission), success itself asserted.
 
-`quick` (the set network, `cpu-3x3x3`'s recipe, 15k env steps, seed 0) is run q2s0 of
+`quick-td3` (the set network, `cpu-3x3x3`'s recipe, 15k env steps, seed 0) is run q2s0 of
 docs/lab/2026-12-04-design-trust-region-quick-5x5x5.md: 28 of its final 32 slews (1 deg and 0.01 rad/s at the
 end of 120 steps) landed, 91 of 100 with `modsat eval`, after 9.4 min of training on one core.
 It is a regression check of that measured run, not a claim about every seed: seeds 1 and 2
@@ -35,7 +35,7 @@ MIN_SUCCESS = 0.5
 
 
 def test_codesign_on_quick_lands_the_slew():
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     assert d["seed"] == 0
     spec = parse_spec(d)
     res = train(spec)

@@ -27,7 +27,7 @@ pytestmark = [pytest.mark.slow, on_the_measured_cpu]  # trains a controller for 
 
 
 def test_flat_controller_with_the_cpu_recipe_settles_most_slews():
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     d.update(algorithm="td3-control", seed=0)
     d["design"]["fixed_design"] = reference_design(3).tolist()
     # One update per env step and the action penalty, as in the measured run (e53), whose

@@ -10,7 +10,7 @@ import pytest
 
 from modsat_core.spec.presets import PRESETS, get_preset
 
-TINY = {"preset": "quick", "overrides": {"training": {"total_env_steps": 400}}}
+TINY = {"preset": "quick-td3", "overrides": {"training": {"total_env_steps": 400}}}
 
 
 def test_submit_preset_returns_201_with_location(api):
@@ -18,7 +18,7 @@ def test_submit_preset_returns_201_with_location(api):
     assert r.status_code == 201, r.text
     job = r.json()
     assert r.headers["location"] == f"/api/jobs/{job['id']}"
-    assert job["status"] == "queued" and job["name"] == "quick"
+    assert job["status"] == "queued" and job["name"] == "quick-td3"
     assert job["spec"]["training"]["total_env_steps"] == 400
     assert job["spec"]["training"]["hidden_sizes"] == [256, 256], "the rest comes from the preset"
     assert job["progress"] == {
@@ -34,7 +34,7 @@ def test_submit_preset_returns_201_with_location(api):
 
 
 def test_submit_whole_spec(api):
-    spec = get_preset("quick").model_dump(mode="json")
+    spec = get_preset("quick-td3").model_dump(mode="json")
     spec["name"] = "my run"
     spec["seed"] = 42
     r = api.client.post("/api/jobs", json=spec)
@@ -49,10 +49,10 @@ def test_submit_whole_spec(api):
         ({"design": {"grid_size": 11}}, "design.grid_size", "<= 10"),
         ({"algorithm": "ppo"}, "algorithm", "td3-codesign"),
         ({"trainig": {}}, "trainig", "unknown field"),
-        ({"preset": "quick", "overrides": {"mission": {"slew_max_deg": 200}}}, "mission.slew_max_deg", "<= 180"),
+        ({"preset": "quick-td3", "overrides": {"mission": {"slew_max_deg": 200}}}, "mission.slew_max_deg", "<= 180"),
         ({"preset": "nope"}, "preset", "known: "),
-        ({"preset": "quick", "overrides": [1]}, "overrides", "expected an object"),
-        ({"preset": "quick", "seed": 3}, "seed", "inside 'overrides'"),
+        ({"preset": "quick-td3", "overrides": [1]}, "overrides", "expected an object"),
+        ({"preset": "quick-td3", "seed": 3}, "seed", "inside 'overrides'"),
         ([1, 2], "body", "expected a JSON object"),
     ],
 )
@@ -221,7 +221,7 @@ def test_unusable_last_event_id_is_not_a_500(api, last_event_id):
 def test_nul_characters_are_4xx_on_both_databases(start_server, any_db_url):
     """PostgreSQL text cannot hold NUL: a job name or an artefact name with one was a 500 there."""
     s = start_server(any_db_url)
-    r = s.client.post("/api/jobs", json={"preset": "quick", "overrides": {"name": "a\u0000b"}})
+    r = s.client.post("/api/jobs", json={"preset": "quick-td3", "overrides": {"name": "a\u0000b"}})
     assert r.status_code == 422, r.text
     assert any(m.startswith("name:") and "NUL" in m for m in r.json()["messages"])
     assert r.json()["detail"][0]["loc"] == ["body", "overrides", "name"]

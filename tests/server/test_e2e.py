@@ -18,7 +18,7 @@ pytestmark = pytest.mark.slow  # a quick run through the whole service
 
 # The quick preset, cut down so that the run takes seconds on 2 cores.
 TINY_QUICK = {
-    "preset": "quick",
+    "preset": "quick-td3",
     "overrides": {
         "name": "e2e",
         "training": {

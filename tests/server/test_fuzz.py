@@ -18,7 +18,7 @@ def fuzz_server(tmp_path_factory):
     d = tmp_path_factory.mktemp("fuzz")
     # Event streams of jobs that never end (there are no workers here) stop after a second.
     s = ServerProc(f"sqlite:///{d / 'jobs.db'}", d / "server.log", env={"MODSAT_SSE_MAX_S": "1"})
-    s.client.post("/api/jobs", json={"preset": "quick"})  # something to find at small ids
+    s.client.post("/api/jobs", json={"preset": "quick-td3"})  # something to find at small ids
     yield s
     s.stop()
 

@@ -13,7 +13,7 @@ from modsat_core.spec.presets import get_preset
 from server.settings import ServerSettings
 from tests.worker.helpers import wait_for
 
-TINY = {"preset": "quick", "overrides": {"training": {"total_env_steps": 400}}}
+TINY = {"preset": "quick-td3", "overrides": {"training": {"total_env_steps": 400}}}
 EVIL = "http://evil.example"
 
 
@@ -104,7 +104,7 @@ def test_an_empty_token_is_an_error_not_the_token_empty(monkeypatch):
 
 
 def _preset(**sections) -> dict:
-    return {"preset": "quick", "overrides": sections}
+    return {"preset": "quick-td3", "overrides": sections}
 
 
 @pytest.mark.parametrize(
@@ -183,7 +183,7 @@ def test_delete_queued_and_ended_jobs_not_running_ones(start_server, sqlite_url,
     assert s.client.delete(f"/api/jobs/{queued}").status_code == 404
     assert s.client.delete("/api/jobs/99999999").status_code == 404
     long = {
-        "preset": "quick",
+        "preset": "quick-td3",
         "overrides": {"training": {"total_env_steps": 1_000_000, "checkpoint_every_steps": 1_000_000}},
     }
     running = s.client.post("/api/jobs", json=long).json()["id"]

@@ -12,7 +12,7 @@ def _job(s, job_id):
 
 def _submit(s, steps, **training):
     r = s.client.post(
-        "/api/jobs", json={"preset": "quick", "overrides": {"training": {"total_env_steps": steps, **training}}}
+        "/api/jobs", json={"preset": "quick-td3", "overrides": {"training": {"total_env_steps": steps, **training}}}
     )
     assert r.status_code == 201, r.text
     return r.json()["id"]

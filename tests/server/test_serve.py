@@ -82,7 +82,7 @@ def _submit(s: Serve, steps: int, checkpoint_every: int = 100_000) -> int:
     r = s.client.post(
         "/api/jobs",
         json={
-            "preset": "quick",
+            "preset": "quick-td3",
             "overrides": {"training": {"total_env_steps": steps, "checkpoint_every_steps": checkpoint_every}},
         },
     )

@@ -13,7 +13,7 @@ PNG = b"\x89PNG\r\n\x1a\n"
 
 # `quick` cut down to seconds, with a GA whose inner TD3 gets twice its learning_starts per design.
 TINY_STUDY_SPEC = {
-    "preset": "quick",
+    "preset": "quick-td3",
     "overrides": {
         **TINY_QUICK["overrides"],
         "name": "tiny study",
@@ -73,7 +73,7 @@ def test_study_over_http_runs_to_completion(start_server, sqlite_url, spawn_work
 def test_study_submissions_are_checked(start_server, sqlite_url):
     s = start_server(sqlite_url, env={"MODSAT_MAX_ACTIVE_JOBS": "5"})
     post = s.client.post
-    spec = {"preset": "quick"}
+    spec = {"preset": "quick-td3"}
 
     def invalid(body, loc: list, words: str) -> None:
         r = post("/api/studies", json=body)
@@ -90,13 +90,12 @@ def test_study_submissions_are_checked(start_server, sqlite_url):
     invalid({"spec": spec, "seeds": [0], "colour": 1}, ["colour"], "unknown field")
     invalid({"seeds": [0]}, ["spec"], "required")
     invalid({"spec": {"preset": "nope"}, "seeds": [0]}, ["spec", "preset"], "unknown preset")
-    over = {"preset": "quick", "overrides": {"training": {"batch_size": 0}}}
+    over = {"preset": "quick-td3", "overrides": {"training": {"batch_size": 0}}}
     invalid({"spec": over, "seeds": [0]}, ["spec", "overrides", "training", "batch_size"], "batch_size")
-    unfair = {"preset": "quick", "overrides": {"ga": {"steps_per_design": 3000}}}  # learning_starts 2000
+    unfair = {"preset": "quick-td3", "overrides": {"ga": {"steps_per_design": 3000}}}  # learning_starts 2000
     invalid({"spec": unfair, "seeds": [0]}, ["spec", "ga", "steps_per_design"], "inner TD3")
-    r = post(
-        "/api/studies", content=b'{"spec": {"preset": "quick"}, "seeds": [0]}', headers={"content-type": "text/plain"}
-    )
+    body = b'{"spec": {"preset": "quick-td3"}, "seeds": [0]}'
+    r = post("/api/studies", content=body, headers={"content-type": "text/plain"})
     assert r.status_code == 415
     r = post("/api/studies", content=b"{not json", headers={"content-type": "application/json"})
     assert r.status_code == 400
@@ -158,7 +157,7 @@ def test_running_jobs_fill_in_the_curves(start_server, sqlite_url):
 
     s = start_server(sqlite_url)
     study = s.client.post(
-        "/api/studies", json={"spec": {"preset": "quick"}, "seeds": [0, 1], "algorithms": ["td3-codesign"]}
+        "/api/studies", json={"spec": {"preset": "quick-td3"}, "seeds": [0, 1], "algorithms": ["td3-codesign"]}
     ).json()
     store = JobStore(sqlite_url)
     try:

@@ -63,7 +63,7 @@ def verify():
 def slew_spec(actuator_model: str = "reaction-wheel", **mission) -> JobSpec:
     """The quick mission (120 control steps) with a residual torque, so every Basilisk
     effector modsat has a twin of is on: wheels, gravity gradient, residual torque."""
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     d["modules"]["actuator_model"] = actuator_model
     d["mission"].update({"residual_torque_Nm": [2e-4, -1e-4, 5e-5], "residual_torque_std_Nm": 1e-4, **mission})
     return JobSpec.model_validate(d)
@@ -136,7 +136,7 @@ def trained_run(tmp_path_factory, verify):
     """
     from modsat_core.training.train import train
 
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     d["modules"]["module_mass_kg"] = 100.0
     d["training"].update(
         total_env_steps=480,
@@ -239,8 +239,8 @@ def test_a_run_that_asks_without_basilisk_says_so(monkeypatch, tmp_path):
 
     monkeypatch.setattr(v, "basilisk_available", lambda: False)
     files = {
-        "spec.json": get_preset("quick")
-        .model_copy(update={"evaluation": get_preset("quick").evaluation.model_copy(update={"basilisk": True})})
+        "spec.json": get_preset("quick-td3")
+        .model_copy(update={"evaluation": get_preset("quick-td3").evaluation.model_copy(update={"basilisk": True})})
         .model_dump_json()
         .encode()
     }

@@ -28,7 +28,7 @@ from .conftest import (
 
 # A GA baseline small enough for CI (about 15 s on 2 cores), submitted over the API.
 TINY_GA = {
-    "preset": "quick",
+    "preset": "quick-td3",
     "overrides": {
         "name": "ga-ci",
         "algorithm": "ga",
@@ -99,9 +99,9 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     budget = get_preset("quick").training.total_env_steps
     assert f'"total_env_steps": {budget}' in page.input_value("#overrides"), "the editor holds the preset"
     page.fill("#f-name", "rl-ci")
-    page.fill("#f-training-total_env_steps", "300")  # form fields write into the JSON editor
+    page.fill("#f-training-total_env_steps", "24576")  # 3 updates; form fields write into the JSON editor
     page.fill("#f-evaluation-episodes", "8")
-    assert '"total_env_steps": 300,' in page.input_value("#overrides")
+    assert '"total_env_steps": 24576,' in page.input_value("#overrides")
     overrides = json.loads(page.input_value("#overrides"))  # the JSON editor: fly the slews in Basilisk too
     overrides["evaluation"]["basilisk"] = True
     page.fill("#overrides", json.dumps(overrides, indent=2))
@@ -109,7 +109,7 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     page.wait_for_selector("#submit-ok:not([hidden])")
     job_id = int(re.search(r"#(\d+)", page.text_content("#submit-ok")).group(1))
     spec = service.client.get(f"/api/jobs/{job_id}").json()["spec"]
-    assert spec["name"] == "rl-ci" and spec["training"]["total_env_steps"] == 300
+    assert spec["name"] == "rl-ci" and spec["training"]["total_env_steps"] == 24576
     assert spec["evaluation"]["episodes"] == 8 and spec["training"]["num_envs"] == 16, "the rest is the preset"
     assert spec["evaluation"]["basilisk"] is True
     r = service.client.post("/api/jobs", json=TINY_GA)

@@ -102,7 +102,7 @@ class Jobs:
         r = self.serve.client.post(
             "/api/jobs",
             json={
-                "preset": "quick",
+                "preset": "quick-td3",
                 "overrides": {
                     "name": name,
                     "training": {"total_env_steps": TOTAL},

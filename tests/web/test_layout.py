@@ -21,7 +21,7 @@ def crowded(tmp_path_factory):
     # 200 queued jobs: above the default queue cap (MODSAT_MAX_ACTIVE_JOBS, 100), raised here.
     s = Serve(d / "data", d / "serve.log", workers=0, viewer=False, env={"MODSAT_MAX_ACTIVE_JOBS": "1000"})
     for i in range(N_JOBS):
-        r = s.client.post("/api/jobs", json={"preset": "quick", "overrides": {"name": f"job-{i + 1:03d}"}})
+        r = s.client.post("/api/jobs", json={"preset": "quick-td3", "overrides": {"name": f"job-{i + 1:03d}"}})
         assert r.status_code == 201, r.text
     yield s
     s.stop()
@@ -91,7 +91,7 @@ def test_bad_spec_shows_the_field_error_next_to_the_form(crowded, new_page):
     before = crowded.client.get("/api/jobs").json()["total"]
 
     # A value out of range, typed into the JSON editor, and an unknown field.
-    budget = get_preset("quick").training.total_env_steps
+    budget = get_preset("quick-td3").training.total_env_steps
     text = page.input_value("#overrides").replace(f'"total_env_steps": {budget}', '"total_env_steps": 0')
     text = text.replace('"seed": 0,', '"seed": 0, "colour": "red",')
     page.fill("#overrides", text)

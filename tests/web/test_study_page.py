@@ -17,7 +17,7 @@ pytestmark = pytest.mark.browser
 # About 15 s per job on 2 cores; the GA's inner TD3 gets twice its learning_starts per design.
 TINY_STUDY = {
     "spec": {
-        "preset": "quick",
+        "preset": "quick-td3",
         "overrides": {
             "name": "study-ci",
             "ga": {"population_size": 2, "steps_per_design": 48},

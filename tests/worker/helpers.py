@@ -57,7 +57,7 @@ def spec_json(
     from modsat_core.spec.jobspec import parse_spec
     from modsat_core.spec.presets import get_preset
 
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     d["seed"] = seed
     d["name"] = name or "test"
     d["training"].update(

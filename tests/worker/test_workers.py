@@ -162,7 +162,7 @@ def test_kill9_during_real_training_resumes_from_its_checkpoint(sqlite_url, spaw
     database, and a new worker's training continues from them."""
     store = JobStore(sqlite_url)
     store.create_schema()
-    d = get_preset("quick").model_dump(mode="json")
+    d = get_preset("quick-td3").model_dump(mode="json")
     d["training"].update(
         total_env_steps=640,
         learning_starts=160,
