@@ -17,7 +17,14 @@ from modsat_core.artefacts import ArtefactError, CurveFile, CurvePoint
 from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, run_from_files, study, table_markdown
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.limits import check as check_limits
-from modsat_core.spec.study import ALGORITHMS, MAX_SEEDS, algorithm_problem, ga_problem, seed_problem, study_specs
+from modsat_core.spec.study import (
+    DEFAULT_ALGORITHMS,
+    MAX_SEEDS,
+    algorithm_problem,
+    ga_problem,
+    seed_problem,
+    study_specs,
+)
 
 from .deps import SettingsDep, StoreDep, WriteAccess
 from .schemas import JobStatus, _time
@@ -100,7 +107,7 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
         base = spec_from_body(body["spec"])
     except Invalid as exc:
         raise Invalid([{**e, "loc": ["body", "spec", *e["loc"][1:]]} for e in exc.errors]) from None
-    seeds, algs = body.get("seeds"), body.get("algorithms", list(ALGORITHMS))
+    seeds, algs = body.get("seeds"), body.get("algorithms", list(DEFAULT_ALGORITHMS))
     for key, problem in (("seeds", seed_problem(seeds)), ("algorithms", algorithm_problem(algs))):
         if problem:
             raise Invalid([{"loc": ["body", key], "msg": problem, "type": "value_error"}])

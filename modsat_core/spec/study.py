@@ -4,10 +4,15 @@ and ``modsat study`` alike; torch-free."""
 
 from __future__ import annotations
 
-from modsat_core.spec.jobspec import JobSpec
+from pydantic import ValidationError
+
+from modsat_core.spec.jobspec import JobSpec, format_errors
 
 MAX_SEEDS = 16
-ALGORITHMS = ("td3-codesign", "ga")
+ALGORITHMS = ("td3-codesign", "ga", "td3-control", "diffsim-control")
+#: A study's algorithms when it names none: the paper's comparison, RL co-design against the GA.
+#: (`td3-control` and `diffsim-control` fly the spec's `design.fixed_design`.)
+DEFAULT_ALGORITHMS = ("td3-codesign", "ga")
 #: The GA's inner TD3 gets at least this many times its ``learning_starts`` per design, so that it
 #: learns on every design (a GA whose inner loop never updates compares RL with random controllers).
 GA_MIN_STEPS_PER_LEARNING_START = 2
@@ -28,6 +33,7 @@ def algorithm_problem(algorithms: object) -> str | None:
     if (
         not isinstance(algorithms, list)
         or not algorithms
+        or not all(isinstance(a, str) for a in algorithms)  # before the set: a dict or list is unhashable
         or len(set(algorithms)) != len(algorithms)
         or not set(algorithms) <= set(ALGORITHMS)
     ):
@@ -51,7 +57,10 @@ def study_specs(base: JobSpec, seeds: list[int], algorithms: list[str]) -> list[
     """One spec per algorithm and seed (algorithms outer): ``base`` with its own seed and algorithm."""
     out = []
     for alg in algorithms:
-        spec = JobSpec.model_validate({**base.model_dump(mode="json"), "algorithm": alg})
+        try:
+            spec = JobSpec.model_validate({**base.model_dump(mode="json"), "algorithm": alg})
+        except ValidationError as exc:  # e.g. `td3-control` on a spec without `design.fixed_design`
+            raise ValueError(f"{alg}: " + "; ".join(format_errors(exc))) from None
         out += [spec.model_copy(update={"seed": s}) for s in seeds]
     return out
 

@@ -85,7 +85,10 @@ def test_study_submissions_are_checked(start_server, sqlite_url):
     invalid({"spec": spec, "seeds": [1, 1]}, ["seeds"], "distinct")
     invalid({"spec": spec, "seeds": [True]}, ["seeds"], "integers")
     invalid({"spec": spec, "seeds": list(range(17))}, ["seeds"], "1 to 16")
-    invalid({"spec": spec, "seeds": [0], "algorithms": ["td3-control"]}, ["algorithms"], "td3-codesign, ga")
+    invalid({"spec": spec, "seeds": [0], "algorithms": ["sac"]}, ["algorithms"], "td3-codesign, ga, td3-control")
+    invalid({"spec": spec, "seeds": [0], "algorithms": [{}]}, ["algorithms"], "distinct names")  # was a 500
+    invalid({"spec": spec, "seeds": [0], "algorithms": [[]]}, ["algorithms"], "distinct names")
+    invalid({"spec": spec, "seeds": [0], "algorithms": ["diffsim-control"]}, ["algorithms"], "design.fixed_design")
     invalid({"spec": spec, "seeds": [0], "algorithms": []}, ["algorithms"], "non-empty")
     invalid({"spec": spec, "seeds": [0], "colour": 1}, ["colour"], "unknown field")
     invalid({"seeds": [0]}, ["spec"], "required")
@@ -94,8 +97,11 @@ def test_study_submissions_are_checked(start_server, sqlite_url):
     invalid({"spec": over, "seeds": [0]}, ["spec", "overrides", "training", "batch_size"], "batch_size")
     unfair = {"preset": "quick-td3", "overrides": {"ga": {"steps_per_design": 3000}}}  # learning_starts 2000
     invalid({"spec": unfair, "seeds": [0]}, ["spec", "ga", "steps_per_design"], "inner TD3")
-    body = b'{"spec": {"preset": "quick-td3"}, "seeds": [0]}'
-    r = post("/api/studies", content=body, headers={"content-type": "text/plain"})
+    r = post(
+        "/api/studies",
+        content=b'{"spec": {"preset": "quick-td3"}, "seeds": [0]}',
+        headers={"content-type": "text/plain"},
+    )
     assert r.status_code == 415
     r = post("/api/studies", content=b"{not json", headers={"content-type": "application/json"})
     assert r.status_code == 400
