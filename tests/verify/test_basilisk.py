@@ -55,7 +55,7 @@ def verify():
         "Basilisk.simulation.reactionWheelStateEffector",
         reason="Basilisk is not installed: pip install -e '.[basilisk]'",
     )
-    from modsat_core.verify.run import run as verify
+    from modsat_core.verify import run as verify
 
     return verify
 
@@ -235,7 +235,7 @@ def test_a_run_that_asks_gets_verification_json(trained_run):
 
 
 def test_a_run_that_asks_without_basilisk_says_so(monkeypatch, tmp_path):
-    from modsat_core.verify.run import run as v
+    from modsat_core.verify import run as v
 
     monkeypatch.setattr(v, "basilisk_available", lambda: False)
     files = {
