@@ -91,7 +91,7 @@ def test_bad_spec_shows_the_field_error_next_to_the_form(crowded, new_page):
     before = crowded.client.get("/api/jobs").json()["total"]
 
     # A value out of range, typed into the JSON editor, and an unknown field.
-    budget = get_preset("quick-td3").training.total_env_steps
+    budget = get_preset("quick").training.total_env_steps  # the form's default preset
     text = page.input_value("#overrides").replace(f'"total_env_steps": {budget}', '"total_env_steps": 0')
     text = text.replace('"seed": 0,', '"seed": 0, "colour": "red",')
     page.fill("#overrides", text)
