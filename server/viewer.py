@@ -20,7 +20,7 @@ from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
 import web
-from web.run import RunData
+from web.run import RunData, learner_label
 
 from .settings import ServerSettings
 
@@ -45,7 +45,7 @@ class StoreRuns:
     def choices(self) -> list[tuple[str, str]]:
         out = []
         for r in self._rows():
-            kind = "GA" if r["algorithm"] == "ga" else "RL"
+            kind = learner_label(r["algorithm"] or "")
             out.append((str(r["id"]), f"#{r['id']} {r['name'] or r['algorithm']} ({kind})"))
         return out
 

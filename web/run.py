@@ -26,6 +26,17 @@ from modsat_core.grid import ACTUATOR, EMPTY
 CONTROLLERS = {"policy": "policy", "pd_baseline": "PD baseline"}
 
 
+def learner_label(algorithm: str) -> str:
+    """How the page and the viewer name a run's learner: ``RL`` (TD3), ``GA`` or ``diffsim``."""
+    if algorithm == "ga":
+        return "GA"
+    if algorithm.startswith("td3"):
+        return "RL"
+    if algorithm.startswith("diffsim"):
+        return "diffsim"
+    return algorithm or "run"
+
+
 @dataclass(frozen=True)
 class Episode:
     """One recorded slew. Arrays are float64; quaternions scalar-first (viser's ``wxyz``)."""
@@ -150,9 +161,9 @@ class RunData:
 
     @property
     def short_algorithm(self) -> str:
-        """``RL`` for the TD3 runs, ``GA`` for the genetic algorithm."""
-        a = self.algorithm
-        return "GA" if a == "ga" else ("RL" if a.startswith("td3") else a or "run")
+        """``RL`` for the TD3 runs, ``GA`` for the genetic algorithm, ``diffsim`` for the first-order
+        learner's."""
+        return learner_label(self.algorithm)
 
     @property
     def controllers(self) -> list[str]:

@@ -200,7 +200,7 @@ def test_open_the_3d_view_and_go_mid_slew(service, new_page):
     for _ in range(18):  # steps of about one control period (1/12 s)
         slider.press("ArrowRight")
     frame.get_by_text(re.compile(r"t = 1\.[3-6]\d s")).first.wait_for()
-    text = frame.get_by_text(re.compile(r"RL error [0-9.]+ deg")).first.text_content()
+    text = frame.get_by_text(re.compile(r"diffsim error [0-9.]+ deg")).first.text_content()
     err = float(re.search(r"error ([0-9.]+) deg", text).group(1))
     assert 2.0 < err < 80.0, f"mid-slew: the error is neither the start's nor zero ({text})"
     time.sleep(1.5)
@@ -260,9 +260,9 @@ def test_rl_and_ga_side_by_side(service, new_page):
     page.select_option("#compare", str(RUN["ga"]))
     page.click("#view-live")
     frame = _open_3d(page)
-    frame.get_by_text(re.compile(r"RL \(job \d+ rl-ci\) vs GA \(job \d+ ga-ci\)")).first.wait_for()
+    frame.get_by_text(re.compile(r"diffsim \(job \d+ rl-ci\) vs GA \(job \d+ ga-ci\)")).first.wait_for()
     # The two readout lines name their runs (issue 14: both said "RL").
-    frame.get_by_text(re.compile(r"RL job \d+ rl-ci error [0-9.]+ deg")).first.wait_for()
+    frame.get_by_text(re.compile(r"diffsim job \d+ rl-ci error [0-9.]+ deg")).first.wait_for()
     frame.get_by_text(re.compile(r"GA job \d+ ga-ci error [0-9.]+ deg")).first.wait_for()
     png = _scene_shot(frame, shots / "rl-vs-ga.png")
     left, right = actuator_pixels(png, (0.0, 0.0, 0.5, 1.0)), actuator_pixels(png, (0.5, 0.0, 1.0, 1.0))

@@ -35,6 +35,14 @@ function el(tag, attrs, ...children) {
   return e;
 }
 
+// How a run's learner is named beside the viewer (web/run.py's learner_label says the same).
+function shortAlgorithm(a) {
+  if (a === "ga") return "GA";
+  if (a.startsWith("td3")) return "RL";
+  if (a.startsWith("diffsim")) return "diffsim";
+  return a || "run";
+}
+
 function authHeaders() {
   const t = localStorage.getItem("modsat.token");
   return t ? { Authorization: "Bearer " + t } : {};
@@ -634,7 +642,7 @@ async function loadCompareOptions() {
   if (r.ok) {
     for (const j of r.body.items) {
       if (String(j.id) === String(state.selected)) continue;
-      sel.append(el("option", { value: j.id, text: `#${j.id} ${j.name || ""} (${j.algorithm === "ga" ? "GA" : "RL"})` }));
+      sel.append(el("option", { value: j.id, text: `#${j.id} ${j.name || ""} (${shortAlgorithm(j.algorithm)})` }));
     }
   }
   sel.value = keep;
