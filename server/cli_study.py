@@ -25,7 +25,9 @@ def add_commands(sub, load_spec, check_limits) -> None:
     s.add_argument("spec", nargs="?", help="a JobSpec JSON file (or use --preset)")
     s.add_argument("--preset", help="a named preset (see `modsat presets`)")
     s.add_argument("--seeds", type=int, nargs="+", required=True, metavar="SEED")
-    s.add_argument("--algorithms", nargs="+", default=["td3-codesign", "ga"], metavar="ALGORITHM")
+    s.add_argument(
+        "--algorithms", nargs="+", metavar="ALGORITHM", help="default td3-codesign ga (modsat_core.spec.study)"
+    )
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--jobs", type=int, default=1, help="runs at once (default 1; at most one per core)")
     s.set_defaults(func=_cmd_study, steps=None, device=None, seed=None, load_spec=load_spec, check_limits=check_limits)
@@ -67,8 +69,17 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_study(args: argparse.Namespace) -> int:
-    from modsat_core.spec.study import algorithm_problem, ga_problem, run_name, seed_problem, study_specs
+    from modsat_core.spec.study import (
+        DEFAULT_ALGORITHMS,
+        algorithm_problem,
+        ga_problem,
+        run_name,
+        seed_problem,
+        study_specs,
+    )
 
+    if args.algorithms is None:
+        args.algorithms = list(DEFAULT_ALGORITHMS)
     base = args.load_spec(args)
     problems = [p for p in (seed_problem(args.seeds), algorithm_problem(args.algorithms)) if p]
     if "ga" in args.algorithms and (p := ga_problem(base)):

@@ -15,7 +15,7 @@ from starlette.concurrency import run_in_threadpool
 
 from modsat_core.artefacts import ArtefactError, CurveFile, CurvePoint
 from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, run_from_files, study, table_markdown
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import JobSpec, SpecError
 from modsat_core.spec.limits import check as check_limits
 from modsat_core.spec.study import (
     DEFAULT_ALGORITHMS,
@@ -116,8 +116,9 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
     assert isinstance(seeds, list) and isinstance(algs, list)  # checked above
     try:
         specs = study_specs(base, seeds, algs)
-    except ValueError as exc:  # the spec is valid for its own algorithm but not for another one of the study
-        raise Invalid([{"loc": ["body", "algorithms"], "msg": f"algorithms: {exc}", "type": "value_error"}]) from None
+    except SpecError as exc:  # the spec is valid for its own algorithm but not for another one of the study
+        msg = "algorithms: " + "; ".join(exc.messages)
+        raise Invalid([{"loc": ["body", "algorithms"], "msg": msg, "type": "value_error"}]) from None
     for spec in specs[:: len(seeds)]:  # one per algorithm: the seed does not change the limits
         problems = check_limits(spec, settings.limits())
         if problems:

@@ -16,6 +16,7 @@ mission's own physics. One torch thread. The output is a JSON list of rows.
 
 from __future__ import annotations
 
+import json
 import platform
 import time
 from typing import Any
@@ -25,7 +26,7 @@ import torch
 
 from modsat_core.grid import ACTUATOR, STRUCTURE
 from modsat_core.sim.gym_envs import reference_design
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import JobSpec, parse_spec
 from modsat_core.spec.presets import get_preset
 
 #: Env steps of a diffsim row: 240 updates of 256 slews x 32 steps (docs/diffsim.md).
@@ -58,7 +59,7 @@ def _spec(algorithm: str, grid: np.ndarray, seed: int, steps: int) -> JobSpec:
         d["training"].update(eval_every_steps=max(1, steps // 4), eval_episodes=8)
     else:  # TD3 on the flat state, as `modsat bench control` trains it: the recipe's widths and rates
         d["training"].update(hidden_sizes=[256, 256])
-    return JobSpec.model_validate(d)
+    return parse_spec(d)  # a SpecError naming the field (a seed out of range, a budget too large)
 
 
 def _row(learner: str, design: str, seed: int | None, train_s: float | None, s: dict, pd: dict) -> dict[str, Any]:
@@ -76,13 +77,10 @@ def _row(learner: str, design: str, seed: int | None, train_s: float | None, s: 
     }
 
 
-def diffsim_row(design: str, seed: int, steps: int = DIFFSIM_STEPS) -> tuple[dict, dict]:
-    """A diffsim row and the PD summary on the same slews."""
-    import json
-
+def diffsim_row(design: str, spec: JobSpec) -> tuple[dict, dict]:
+    """A diffsim row of ``spec`` (see :func:`_spec`) and the PD summary on the same slews."""
     from modsat_core.training.train import train
 
-    spec = _spec("diffsim-control", DESIGNS[design](), seed, steps)
     t0 = time.monotonic()
     ended: list[float] = []
 
@@ -93,16 +91,15 @@ def diffsim_row(design: str, seed: int, steps: int = DIFFSIM_STEPS) -> tuple[dic
     res = train(spec, on_progress=progress)
     ev = json.loads(res.artifacts()["evaluation.json"])
     pd = ev["pd_baseline"]["summary"]
-    return _row("diffsim", design, seed, ended[0], ev["policy"]["summary"], pd), pd
+    return _row("diffsim", design, spec.seed, ended[0], ev["policy"]["summary"], pd), pd
 
 
-def td3_row(design: str, seed: int, wall_s: float, pd: dict) -> dict:
-    """A TD3 row trained for ``wall_s`` seconds (flat MLP, `modsat bench control`)."""
+def td3_row(design: str, spec: JobSpec, wall_s: float, pd: dict) -> dict:
+    """A TD3 row of ``spec`` trained for ``wall_s`` seconds (flat MLP, `modsat bench control`)."""
     from modsat_core.training.td3_control import bench_control
 
-    spec = _spec("td3-control", DESIGNS[design](), seed, 10**9)
     out = bench_control(spec, eval_every=10**9, max_wall_s=wall_s)  # evaluated once, at the end
-    row = _row("td3", design, seed, out["train_s"], out["best"], pd)
+    row = _row("td3", design, spec.seed, out["train_s"], out["best"], pd)
     row["env_steps"] = out["env_steps"]
     return row
 
@@ -120,13 +117,23 @@ def bench_learners(
         if log:
             log(rows[-1])
 
+    # Every spec validated before any run starts: a bad seed or budget fails at once, not an hour in.
+    specs = {
+        (design, seed): (
+            _spec("diffsim-control", DESIGNS[design](), seed, steps),
+            _spec("td3-control", DESIGNS[design](), seed, 10**9),
+        )
+        for design in designs
+        for seed in seeds
+    }
     for design in designs:
         pd: dict | None = None
         for seed in seeds:
-            row, pd = diffsim_row(design, seed, steps)
+            diffsim_spec, td3_spec = specs[design, seed]
+            row, pd = diffsim_row(design, diffsim_spec)
             add(row)
             if td3:
-                add(td3_row(design, seed, row["train_s"], pd))
+                add(td3_row(design, td3_spec, row["train_s"], pd))
         if pd is not None:
             add(_row("pd", design, None, None, pd, pd))
     return rows

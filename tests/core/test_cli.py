@@ -111,6 +111,11 @@ def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     assert r.returncode == 2 and "ga.population_size" in r.stderr
     r = modsat("bench", "rl-vs-ga", "--preset", "ga-3x3x3")
     assert r.returncode != 0 and "td3-codesign" in r.stderr
+    r = modsat("bench", "learners", "--seeds", "0", "-1", "--no-td3")
+    assert r.returncode == 2 and "seed: -1 is out of range" in r.stderr and "Traceback" not in r.stderr
+    out = str(tmp_path / "study")
+    r = modsat("study", "--preset", "quick-td3", "--seeds", "0", "--algorithms", "diffsim-control", "--out", out)
+    assert r.returncode == 2 and "design.fixed_design" in r.stderr and "Traceback" not in r.stderr
 
 
 def test_sigterm_stops_train_at_a_checkpoint_that_resumes(tmp_path):
