@@ -14,7 +14,7 @@ import torch
 from modsat_core.agent.diffsim_policy import DIFFSIM_NETWORK, N_DIFFSIM_INPUTS, DiffsimPolicy
 from modsat_core.agent.networks import make_actor
 from modsat_core.codesign.features import N_FEATURES
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import JobSpec, is_diffsim
 
 #: Version 2: the network is named in the file (``per-module`` or ``set``), 53 features.
 POLICY_VERSION = 2
@@ -31,11 +31,6 @@ def load_plain(data: bytes, what: str, allow: list | tuple = ()) -> object:
             f"not a modsat {what}: it holds objects other than tensors and plain data, which are "
             f"not loaded (torch.load weights_only): {str(exc).splitlines()[-1][:200]}"
         ) from None
-
-
-def is_diffsim(spec: JobSpec) -> bool:
-    """Whether the spec's policy is the first-order learner's controller (else TD3's actor)."""
-    return spec.algorithm == "diffsim-control"
 
 
 def network_of(spec: JobSpec) -> tuple[str, list[int], int]:

@@ -79,6 +79,11 @@ class JobSpec(_Section):
         return self
 
 
+def is_diffsim(spec: JobSpec) -> bool:
+    """Whether ``spec`` is trained by the first-order learner (its policy, its memory, its trainer)."""
+    return spec.algorithm == "diffsim-control"
+
+
 class UnrunnableSpec(ValueError):
     """A valid spec that cannot run where it was sent (e.g. ``device: cuda`` without a GPU).
     Retrying cannot help: a worker fails the job at once."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import JobSpec, is_diffsim
 
 #: Per-cell features (``features.N_FEATURES``; a test checks they agree).
 N_FEATURES = 53
@@ -97,7 +97,7 @@ def estimate(spec: JobSpec) -> Estimate:
     # evaluation, flown by the policy and by the PD baseline.
     curve_points = t.total_env_steps // t.eval_every_steps + 1
     evaluation_steps = m.episode_steps * (curve_points * t.eval_episodes + 2 * e.episodes)
-    if spec.algorithm == "diffsim-control":  # no replay, no per-cell features: one window's graph
+    if is_diffsim(spec):  # no replay, no per-cell features: one window's graph
         d = spec.diffsim
         substeps = m.frame_skip if d.substeps is None else d.substeps
         window = d.batch_size * d.window_steps * (substeps * DIFFSIM_BYTES_PER_SUBSTEP + DIFFSIM_BYTES_PER_STEP)

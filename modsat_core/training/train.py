@@ -13,10 +13,9 @@ that would), so it may end up to ``num_envs - 1`` steps short of it.
 
 from __future__ import annotations
 
-from modsat_core.agent.policy_file import is_diffsim
 from modsat_core.artefacts import ProgressRecord
 from modsat_core.evaluation.run_files import run_files
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import JobSpec, is_diffsim
 from modsat_core.training.checkpoint import (
     CHECKPOINT_VERSION,
     CheckpointFn,
