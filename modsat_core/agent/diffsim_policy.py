@@ -81,10 +81,6 @@ class DiffsimPolicy(nn.Module):
         return torch.tanh(0.5 * (self.net(x) - self.net(x * self.mirror)))
 
 
-def _box_Nm(sim: SlewSim) -> Tensor:
-    return sim.plant.n_actuators.to(sim.dtype).unsqueeze(-1) * sim.plant.tau_max_Nm
-
-
 class DiffsimController:
     """Flies :class:`SlewSim`'s satellites with a :class:`DiffsimPolicy`: ``controller(sim) -> action``
     (B, K, 3) in [-1, 1], the same per-unit fraction for every wheel unit. Differentiable: the
@@ -98,7 +94,7 @@ class DiffsimController:
 
     def __call__(self, sim: SlewSim) -> Tensor:
         x = diffsim_inputs(
-            sim.error_quaternion(), sim.state.omega_B, sim.state.h_B.sum(dim=1), self.rate_limit, _box_Nm(sim)
+            sim.error_quaternion(), sim.state.omega_B, sim.state.h_B.sum(dim=1), self.rate_limit, sim.plant.box_Nm
         )
         f = self.policy(x.to(device=self.device, dtype=self.dtype)).to(device=sim.device, dtype=sim.dtype)
         return f.unsqueeze(1) * sim.plant.actuator_mask.unsqueeze(-1).to(sim.dtype)

@@ -83,6 +83,11 @@ class Plant:
         """(B,) number of wheel units of each satellite."""
         return self.actuator_mask.sum(dim=1)
 
+    @property
+    def box_Nm(self) -> Tensor:
+        """(B, 1) half-width of the body-torque box the wheel units span, ``K tau_max`` per axis, N m."""
+        return self.n_actuators.to(self.I_B.dtype).unsqueeze(-1) * self.tau_max_Nm
+
     def index(self, idx: Tensor) -> Plant:
         """The plants of a subset of satellites (idx: (b,) long or (B,) bool)."""
         return replace(

@@ -60,11 +60,10 @@ class PDController:
         w_cmd = w_cmd * torch.clamp(g.omega_lim_rad_s / norm.clamp(min=1e-12), max=1.0)
         H_B = _matvec(plant.I_B, st.omega_B) + st.h_B.sum(dim=1)
         tau = g.c_per_s.unsqueeze(-1) * _matvec(plant.I_B, w_cmd - st.omega_B) + torch.cross(st.omega_B, H_B, dim=-1)
-        box = plant.n_actuators.to(sim.dtype).unsqueeze(-1) * plant.tau_max_Nm
-        scale = torch.clamp((tau.abs() / box).amax(dim=-1, keepdim=True), min=1.0)
+        scale = torch.clamp((tau.abs() / plant.box_Nm).amax(dim=-1, keepdim=True), min=1.0)
         return tau / scale
 
     def __call__(self, sim: SlewSim) -> Tensor:
         plant = sim.plant
-        per_unit = self.torque(sim) / (plant.n_actuators.to(sim.dtype).unsqueeze(-1) * plant.tau_max_Nm)
+        per_unit = self.torque(sim) / plant.box_Nm
         return per_unit.unsqueeze(1) * plant.actuator_mask.unsqueeze(-1)
