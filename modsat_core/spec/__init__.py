@@ -3,34 +3,7 @@ studies, its schema page. Torch-free.
 
 ``from modsat_core.spec import JobSpec, parse_spec`` reads the spec's public face from here."""
 
-from modsat_core.spec.jobspec import (
-    GA,
-    DesignSpace,
-    Diffsim,
-    Evaluation,
-    JobSpec,
-    Mission,
-    ModuleCatalog,
-    RewardSpec,
-    SpecError,
-    Training,
-    UnrunnableSpec,
-    format_errors,
-    parse_spec,
-)
+from modsat_core.spec import jobspec
+from modsat_core.spec.jobspec import *  # noqa: F403 (the spec's public face: jobspec.__all__, listed once)
 
-__all__ = [
-    "GA",
-    "DesignSpace",
-    "Diffsim",
-    "Evaluation",
-    "JobSpec",
-    "Mission",
-    "ModuleCatalog",
-    "RewardSpec",
-    "SpecError",
-    "Training",
-    "UnrunnableSpec",
-    "format_errors",
-    "parse_spec",
-]
+__all__ = jobspec.__all__
