@@ -72,3 +72,19 @@ def validity_problem(design) -> str | None:
 
 def is_valid(design) -> bool:
     return validity_problem(design) is None
+
+
+def random_design(rng: np.random.Generator, N: int) -> np.ndarray:
+    """An N x N x N grid whose cells are empty, structure or actuator with equal chance (int64;
+    usually not valid)."""
+    return rng.integers(0, 3, size=(N, N, N)).astype(np.int64)
+
+
+def random_valid_design(rng: np.random.Generator, N: int, max_draws: int = 100_000) -> np.ndarray:
+    """A :func:`random_design` drawn again until it is valid: the distribution of the GA's first
+    generation, and of the designs a design-conditioned controller learns to fly."""
+    for _ in range(max_draws):
+        grid = random_design(rng, N)
+        if is_valid(grid):
+            return grid
+    raise RuntimeError(f"no valid {N}^3 design in {max_draws} random draws")

@@ -103,6 +103,22 @@ def _cmd_bench_control(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_designs(args: argparse.Namespace) -> int:
+    _set_threads(None)
+    from modsat_core.bench.designs import bench_designs
+
+    for name in ("updates", "pool", "designs", "slews"):
+        if getattr(args, name) < 1:
+            raise SystemExit(f"modsat bench designs: --{name} must be at least 1")
+    if args.out:
+        if os.path.isdir(args.out):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    report = bench_designs(args.seed, args.updates, args.pool, args.designs, args.slews, args.grid_size)
+    _print_report(report, args.out)
+    return 0
+
+
 def _cmd_bench_learners(args: argparse.Namespace) -> int:
     _set_threads(None)
     from modsat_core.bench.learners import DESIGNS, DIFFSIM_STEPS, bench_learners
@@ -529,6 +545,19 @@ def build_parser() -> argparse.ArgumentParser:
     bl2.add_argument("--no-td3", action="store_true", help="leave out the TD3 rows")
     bl2.add_argument("--out", help="also write the rows (JSON) to this file")
     bl2.set_defaults(func=_cmd_bench_learners, threads=None)
+
+    bd = bsub.add_parser(
+        "designs",
+        help="a design-conditioned diffsim controller and PD on held-out random designs (JSON)",
+    )
+    bd.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    bd.add_argument("--grid-size", type=int, choices=(3, 5), default=3, help="3 (cpu-3x3x3) or 5 (paper-5x5x5)")
+    bd.add_argument("--updates", type=int, default=240, help="training updates (default 240)")
+    bd.add_argument("--pool", type=int, default=330, help="random training designs (default 330)")
+    bd.add_argument("--designs", type=int, default=100, help="held-out designs (default 100)")
+    bd.add_argument("--slews", type=int, default=32, help="slews per held-out design (default 32)")
+    bd.add_argument("--out", help="also write the JSON report to this file")
+    bd.set_defaults(func=_cmd_bench_designs, threads=None)
 
     pr = sub.add_parser("presets", help="list the named presets, or print one as JSON")
     pr.add_argument("name", nargs="?")

@@ -24,7 +24,8 @@ from modsat_core.codesign.features import (
 from modsat_core.codesign.mdp import seed_grid
 from modsat_core.grid import ACTUATOR
 from modsat_core.sim.morphology import seed_component_batched
-from modsat_core.sim.slew import SlewSim
+from modsat_core.sim.pd import pd_gains
+from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.jobspec import JobSpec
 
 
@@ -129,14 +130,18 @@ def controller_for(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> Callabl
     """What flies ``grid`` with ``actor`` in :func:`~modsat_core.evaluation.monte_carlo.monte_carlo`:
     the first-order learner's controller or the co-design actor's control head."""
     if isinstance(actor, DiffsimPolicy):
-        return DiffsimController(actor, spec.mission.rate_limit_rad_s)
+        return DiffsimController(actor, spec.mission.rate_limit_rad_s, spec.diffsim.base)
     return PolicyController(actor, grid, spec)
 
 
 def exported(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> nn.Module:
     """The standalone controller of ``actor`` flying ``grid``: ``forward(q_BT, omega_B, h_B)``."""
     if isinstance(actor, DiffsimPolicy):
-        return ExportedDiffsimController(actor, grid, spec.mission.rate_limit_rad_s, spec.modules.torque_scale_Nm)
+        sim = SlewSim.from_designs([Design.from_grid(grid, spec.modules)], spec.mission, spec.modules)
+        pd = pd_gains(sim) if spec.diffsim.base == "pd" else None  # the design's PD law, as training flew it
+        return ExportedDiffsimController(
+            actor, grid, spec.mission.rate_limit_rad_s, spec.modules.torque_scale_Nm, sim.plant.I_B[0], pd
+        )
     return ExportedController(actor, grid, spec)
 
 

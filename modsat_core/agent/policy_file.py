@@ -11,7 +11,13 @@ import pickle
 import numpy as np
 import torch
 
-from modsat_core.agent.diffsim_policy import DIFFSIM_NETWORK, N_DIFFSIM_INPUTS, DiffsimPolicy
+from modsat_core.agent.diffsim_policy import (
+    DIFFSIM_NETWORK,
+    DIFFSIM_PD_NETWORK,
+    N_DESIGN_INPUTS,
+    N_DIFFSIM_INPUTS,
+    DiffsimPolicy,
+)
 from modsat_core.agent.networks import make_actor
 from modsat_core.codesign.features import N_FEATURES
 from modsat_core.spec.jobspec import JobSpec, is_diffsim
@@ -33,10 +39,15 @@ def load_plain(data: bytes, what: str, allow: list | tuple = ()) -> object:
         ) from None
 
 
+def _n_design(spec: JobSpec) -> int:
+    return N_DESIGN_INPUTS if spec.diffsim.design_pool > 0 else 0
+
+
 def network_of(spec: JobSpec) -> tuple[str, list[int], int]:
     """The network a spec's policy is: its name in ``policy.pt``, its widths and its inputs."""
     if is_diffsim(spec):
-        return DIFFSIM_NETWORK, list(spec.diffsim.hidden_sizes), N_DIFFSIM_INPUTS
+        name = DIFFSIM_PD_NETWORK if spec.diffsim.base == "pd" else DIFFSIM_NETWORK
+        return name, list(spec.diffsim.hidden_sizes), N_DIFFSIM_INPUTS + _n_design(spec)
     return spec.training.network, list(spec.training.hidden_sizes), N_FEATURES
 
 
@@ -44,7 +55,7 @@ def new_actor(spec: JobSpec) -> torch.nn.Module:
     """The policy network of a spec: the first-order learner's controller (``diffsim.hidden_sizes``)
     or the co-design actor (``training.network``, ``hidden_sizes``, ``odd_control``)."""
     if is_diffsim(spec):
-        return DiffsimPolicy(list(spec.diffsim.hidden_sizes))
+        return DiffsimPolicy(list(spec.diffsim.hidden_sizes), _n_design(spec))
     t = spec.training
     return make_actor(t.network, N_FEATURES, list(t.hidden_sizes), t.odd_control)
 
@@ -85,13 +96,18 @@ def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpe
     d = load_plain(data, "policy file")
     if not isinstance(d, dict) or d.get("format") != "modsat-policy":
         raise ValueError("not a modsat policy file")
-    if d.get("version") != POLICY_VERSION or d.get("n_features") not in (N_FEATURES, N_DIFFSIM_INPUTS):
+    inputs = (N_FEATURES, N_DIFFSIM_INPUTS, N_DIFFSIM_INPUTS + N_DESIGN_INPUTS)
+    if d.get("version") != POLICY_VERSION or d.get("n_features") not in inputs:
         raise ValueError(
             f"policy file version {d.get('version')} ({d.get('n_features')} features) is from an "
             f"older modsat; this one reads version {POLICY_VERSION} ({N_FEATURES} features, or "
-            f"{N_DIFFSIM_INPUTS} inputs for {DIFFSIM_NETWORK}): train the run again"
+            f"{N_DIFFSIM_INPUTS} (+{N_DESIGN_INPUTS}) inputs for the first-order learner's "
+            f"controller): train the run again"
         )
     spec = JobSpec.model_validate(d["spec"])
+    if d.get("network") == DIFFSIM_NETWORK and is_diffsim(spec) and spec.diffsim.base != "none":
+        # Written before `diffsim.base` existed (its spec has no such key): the network alone.
+        spec = spec.model_copy(update={"diffsim": spec.diffsim.model_copy(update={"base": "none"})})
     actor = actor_from_state(spec, d["actor"])
     grid = None if d["grid"] is None else np.asarray(d["grid"], dtype=np.int64)
     return actor, grid, spec

@@ -45,6 +45,29 @@ def pd_gains(sim: SlewSim, rate_margin: float = 0.8, decel_fraction: float = 0.2
     return PDGains(lam_per_s=lam, c_per_s=4.0 * lam, omega_lim_rad_s=omega_lim)
 
 
+def pd_torque(
+    q_BT: Tensor,
+    omega_B: Tensor,
+    h_tot_B: Tensor,
+    I_B: Tensor,
+    lam_per_s: Tensor,
+    c_per_s: Tensor,
+    omega_lim_rad_s: float,
+    box_Nm: Tensor,
+) -> Tensor:
+    """The law of the module docstring: body torque (B, 3), N m, scaled into the box ``box_Nm``
+    (B, 1) from the error quaternion (B, 4) wxyz, the body rate and total wheel momentum (B, 3),
+    the inertia (B, 3, 3) or (3, 3) and the gains (B,) or (1,). Plain tensor code: it also runs
+    inside exported controllers (TorchScript)."""
+    w_cmd = -2.0 * lam_per_s.unsqueeze(-1) * q_BT[:, 1:]
+    norm = w_cmd.norm(p=2, dim=-1, keepdim=True)
+    w_cmd = w_cmd * torch.clamp(omega_lim_rad_s / norm.clamp(min=1e-12), max=1.0)
+    H_B = _matvec(I_B, omega_B) + h_tot_B
+    tau = c_per_s.unsqueeze(-1) * _matvec(I_B, w_cmd - omega_B) + torch.cross(omega_B, H_B, dim=-1)
+    scale = torch.clamp((tau.abs() / box_Nm).amax(dim=-1, keepdim=True), min=1.0)
+    return tau / scale
+
+
 class PDController:
     """Callable ``controller(sim) -> action (B, K, 3)`` in [-1, 1] for :class:`SlewSim`."""
 
@@ -54,14 +77,16 @@ class PDController:
     def torque(self, sim: SlewSim) -> Tensor:
         """Total body torque command (B, 3), N m, inside the wheel units' box."""
         g, plant, st = self.gains, sim.plant, sim.state
-        q_e = sim.error_quaternion()
-        w_cmd = -2.0 * g.lam_per_s.unsqueeze(-1) * q_e[:, 1:]
-        norm = w_cmd.norm(dim=-1, keepdim=True)
-        w_cmd = w_cmd * torch.clamp(g.omega_lim_rad_s / norm.clamp(min=1e-12), max=1.0)
-        H_B = _matvec(plant.I_B, st.omega_B) + st.h_B.sum(dim=1)
-        tau = g.c_per_s.unsqueeze(-1) * _matvec(plant.I_B, w_cmd - st.omega_B) + torch.cross(st.omega_B, H_B, dim=-1)
-        scale = torch.clamp((tau.abs() / plant.box_Nm).amax(dim=-1, keepdim=True), min=1.0)
-        return tau / scale
+        return pd_torque(
+            sim.error_quaternion(),
+            st.omega_B,
+            st.h_B.sum(dim=1),
+            plant.I_B,
+            g.lam_per_s,
+            g.c_per_s,
+            g.omega_lim_rad_s,
+            plant.box_Nm,
+        )
 
     def __call__(self, sim: SlewSim) -> Tensor:
         plant = sim.plant

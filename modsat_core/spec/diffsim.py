@@ -4,7 +4,7 @@ settings (docs/diffsim.md). The budget, the curve and the checkpoints stay in `t
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
@@ -14,6 +14,26 @@ from modsat_core.spec.sections import _Section
 class Diffsim(_Section):
     """Backpropagation of a smooth mission cost through the batched simulator (`diffsim-control`)."""
 
+    base: Literal["pd", "none"] = Field(
+        "pd",
+        description=(
+            "`pd`: the torque is the design's PD law (the baseline's) plus the network's correction, "
+            "which starts near zero, so training starts from PD's slews and makes them faster. `none`: "
+            "the network alone (learned from scratch; its slews settled 9-28 % later than PD's)."
+        ),
+    )
+    design_pool: int = Field(
+        0,
+        ge=0,
+        le=100_000,
+        description=(
+            "0: the controller flies the run's design (`design.fixed_design`) only. Above 0: a "
+            "design-conditioned controller, its inputs extended by the design's (torque-to-inertia "
+            "ratio per axis, products of inertia); each training slew flies the run's design or one of "
+            "this many random valid designs of the design space (drawn once, cells empty, structure or "
+            "actuator with equal chance), so that it flies a design it has not seen."
+        ),
+    )
     batch_size: int = Field(256, ge=1, le=16384, description="Training slews flown in parallel.")
     window_steps: int = Field(
         32,

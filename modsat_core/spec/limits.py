@@ -35,6 +35,9 @@ _STEP_COPIES = 4
 #: wheel units, B = 1024 and 2048, 16 steps of 5 substeps (1.4 and 0.9 KB), rounded up.
 DIFFSIM_BYTES_PER_SUBSTEP = 1536
 DIFFSIM_BYTES_PER_STEP = 2048
+#: ... and per wheel unit and RK4 step (the units' momentum and its RK4 stages; an upper bound, as
+#: the measurement above includes 1-3 units). A design pool can hold up to N^3 units a design.
+DIFFSIM_BYTES_PER_UNIT_SUBSTEP = 160
 #: What a run needs besides the estimate above: the interpreter, torch, the simulator.
 BASE_BYTES = 600 * 2**20
 GIB = 2**30
@@ -100,7 +103,10 @@ def estimate(spec: JobSpec) -> Estimate:
     if is_diffsim(spec):  # no replay, no per-cell features: one window's graph
         d = spec.diffsim
         substeps = m.frame_skip if d.substeps is None else d.substeps
-        window = d.batch_size * d.window_steps * (substeps * DIFFSIM_BYTES_PER_SUBSTEP + DIFFSIM_BYTES_PER_STEP)
+        fixed = spec.design.fixed_design
+        units = spec.design.grid_size**3 if d.design_pool or fixed is None else sum(c == 2 for c in _cells(fixed))
+        per_substep = DIFFSIM_BYTES_PER_SUBSTEP + units * DIFFSIM_BYTES_PER_UNIT_SUBSTEP
+        window = d.batch_size * d.window_steps * (substeps * per_substep + DIFFSIM_BYTES_PER_STEP)
         return Estimate(
             replay_bytes=0,
             update_bytes=window,
@@ -211,3 +217,8 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
             )
         )
     return out
+
+
+def _cells(grid: list) -> list[int]:
+    """The cells of a nested-list design, flattened."""
+    return [c for plane in grid for row in plane for c in row]

@@ -27,16 +27,18 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import cast
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from modsat_core.agent.diffsim_policy import DiffsimController, DiffsimPolicy
-from modsat_core.agent.policy_file import actor_from_state
+from modsat_core.agent.policy_file import actor_from_state, new_actor
 from modsat_core.artefacts import ProgressRecord
 from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
+from modsat_core.grid import random_valid_design
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.diffsim import Diffsim
@@ -89,19 +91,30 @@ class DiffsimRun:
         assert spec.design.fixed_design is not None  # the spec's validator requires it
         self.spec, self.d, self.t, self.device = spec, spec.diffsim, spec.training, device
         torch.manual_seed(spec.seed)
-        self.policy = DiffsimPolicy(list(self.d.hidden_sizes)).to(device)
-        self.controller = DiffsimController(self.policy, spec.mission.rate_limit_rad_s)
+        self.policy = cast(DiffsimPolicy, new_actor(spec)).to(device)
+        self.controller = DiffsimController(self.policy, spec.mission.rate_limit_rad_s, self.d.base)
         self.opt = torch.optim.Adam(self.policy.parameters(), lr=self.d.lr)
         self.grid = np.asarray(spec.design.fixed_design, dtype=np.int64)
         B = self.d.batch_size
+        self.rng = np.random.default_rng([spec.seed, 1])
+        # The designs training flies: the run's, and with a pool, random valid ones (drawn from a
+        # stream of their own, so that the pool is the same whatever the flights draw).
+        pool_rng = np.random.default_rng([spec.seed, 2])
+        grids = [self.grid] + [random_valid_design(pool_rng, spec.design.grid_size) for _ in range(self.d.design_pool)]
+        self.pool = [Design.from_grid(g, spec.modules) for g in grids]
+        self.row_design = torch.zeros(B, dtype=torch.long)
+        if len(self.pool) > 1:
+            self.row_design = torch.as_tensor(self.rng.integers(0, len(self.pool), size=B), dtype=torch.long)
+            # Row 0 starts on the design with the most wheel units: the simulator's unit slots are
+            # sized by its first designs, and every pool design must fit them.
+            self.row_design[0] = int(np.argmax([d.n_actuators for d in self.pool]))
         self.sim = SlewSim.from_designs(
-            [Design.from_grid(self.grid, spec.modules)] * B,
+            [self.pool[i] for i in self.row_design.tolist()],
             training_mission(spec.mission, self.d.substeps),
             spec.modules,
             dtype=torch.float32,
             device=device,
         )
-        self.rng = np.random.default_rng([spec.seed, 1])
         W, T = self.d.window_steps, self.d.episode_steps
         # Staggered first slews: row i's first slew ends after a random whole number of windows,
         # so that later windows hold slews at every stage.
@@ -147,10 +160,24 @@ class DiffsimRun:
         ended = (self.ep_steps >= self.d.episode_steps) | self.sim.metrics.violated.cpu()
         idx = torch.nonzero(ended).flatten()
         if len(idx):
+            if len(self.pool) > 1:
+                self.row_design[idx] = torch.as_tensor(self.rng.integers(0, len(self.pool), size=len(idx)))
+                self.fly_designs(idx)
             self.sim.reset(idx.tolist(), [draw_episode(self.rng, self.spec.mission) for _ in range(len(idx))])
             self.ep_steps[idx] = 0
         self.last = {"loss": float(loss.detach()), "grad_norm": grad_norm}
         return self.last
+
+    def fly_designs(self, idx: Tensor) -> None:
+        """Put rows ``idx`` on their designs of the pool (``row_design``)."""
+        designs = [self.pool[i] for i in self.row_design[idx].tolist()]
+        K = self.sim.plant.actuator_mask.shape[1]
+        mask = torch.zeros(len(designs), K, dtype=torch.bool)
+        for r, d in enumerate(designs):
+            mask[r, : d.n_actuators] = True
+        I_B = torch.as_tensor(np.stack([d.I_B for d in designs]))
+        dev = self.sim.device
+        self.sim.set_plants(idx.to(dev), I_B.to(dev), mask.to(dev))
 
     # ------------------------------------------------------------------ the run
     def run(self, on_progress: ProgressFn, on_checkpoint: CheckpointFn, should_stop: StopFn) -> bool:
@@ -218,6 +245,7 @@ class DiffsimRun:
             "opt": to_cpu(self.opt.state_dict()),
             "rng": self.rng.bit_generator.state,
             "ep_steps": self.ep_steps.clone(),
+            "row_design": self.row_design.clone(),
             "sim": self.sim.flight_state(),
         }
 
@@ -231,4 +259,7 @@ class DiffsimRun:
         self.opt.load_state_dict(d["opt"])
         self.rng.bit_generator.state = d["rng"]
         self.ep_steps = torch.as_tensor(d["ep_steps"], dtype=torch.long)
+        if len(self.pool) > 1:
+            self.row_design = torch.as_tensor(d["row_design"], dtype=torch.long)
+            self.fly_designs(torch.arange(len(self.row_design)))
         self.sim.load_flight(d["sim"])

@@ -29,7 +29,7 @@ import numpy as np
 from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.artefacts import CurvePoint, ProgressRecord
 from modsat_core.evaluation.run_files import run_files
-from modsat_core.grid import is_valid
+from modsat_core.grid import is_valid, random_design
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.training.checkpoint import CHECKPOINT_VERSION, RunResult
 from modsat_core.training.td3_trainer import TD3Run
@@ -43,10 +43,6 @@ def survivor_count(spec: JobSpec, used: int) -> tuple[int, float]:
     share = min(1.0, used / spec.training.total_env_steps)
     frac = g.survivor_start + (g.survivor_end - g.survivor_start) * share
     return min(max(2, math.ceil(P * frac)), P - 1), frac
-
-
-def random_design(rng: np.random.Generator, N: int) -> np.ndarray:
-    return rng.integers(0, 3, size=(N, N, N)).astype(np.int64)
 
 
 def mutate(rng: np.random.Generator, grid: np.ndarray, rate: float) -> np.ndarray:

@@ -16,9 +16,8 @@ from modsat_core.agent.policy import design_with
 from modsat_core.agent.policy_file import new_actor
 from modsat_core.codesign.mdp import effective_invalid_penalty
 from modsat_core.evaluation.run_files import REPORT_TOLERANCES_DEG, evaluate_design
-from modsat_core.grid import ACTUATOR, EMPTY, is_valid
+from modsat_core.grid import ACTUATOR, EMPTY, is_valid, random_design
 from modsat_core.spec.jobspec import JobSpec
-from modsat_core.training.ga import random_design
 
 MAX_DRAWS = 10_000
 
