@@ -52,6 +52,7 @@ from .db import (
     make_engine,
     metadata,
     metrics,
+    migrate_sqlite,
     study_jobs,
     workers,
 )
@@ -122,7 +123,8 @@ class JobStore(StudyQueries):
         return self.engine.url.render_as_string(hide_password=True)
 
     def create_schema(self) -> None:
-        """Create the tables that do not exist yet (idempotent, safe from several processes).
+        """Create the tables that do not exist yet and bring older SQLite stores up to date
+        (idempotent, safe from several processes).
 
         Two processes creating the tables at the same moment on PostgreSQL can collide;
         the loser tries again and then finds them."""
@@ -130,11 +132,13 @@ class JobStore(StudyQueries):
             try:
                 with self._write_engine.begin() as conn:
                     metadata.create_all(conn, checkfirst=True)
-                return
+                break
             except (ProgrammingError, IntegrityError):
                 if attempt == 2:
                     raise
                 time.sleep(0.2 * (attempt + 1))
+        if self.backend == "sqlite":
+            migrate_sqlite(self.engine)
 
     def drop_schema(self) -> None:
         """Drop every table (tests and benchmarks)."""
