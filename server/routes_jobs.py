@@ -14,7 +14,7 @@ from fastapi.responses import JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from modsat_core.spec.limits import check as check_limits
-from worker.db import TERMINAL_STATUSES
+from worker.db import TERMINAL_STATUSES, QueueFull
 
 from .deps import SettingsDep, StoreDep, WriteAccess
 from .schemas import (
@@ -95,15 +95,6 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
         return invalid_response(exc)
-    active = await run_in_threadpool(store.active_count)
-    if active >= settings.max_active_jobs:
-        raise HTTPException(
-            429,
-            f"{active} jobs are queued or running, the most this service takes "
-            f"(MODSAT_MAX_ACTIVE_JOBS = {settings.max_active_jobs}); submit again when some "
-            "have ended",
-            headers={"Retry-After": "60"},
-        )
 
     def create() -> JobDetail:
         job_id = store.submit(
@@ -112,12 +103,22 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
             algorithm=spec.algorithm,
             total_env_steps=spec.training.total_env_steps,
             max_attempts=settings.max_attempts,
+            max_active=settings.max_active_jobs,
         )
         job = _detail(store, job_id)
         assert job is not None  # the row was just inserted
         return job
 
-    job = await run_in_threadpool(create)
+    try:
+        job = await run_in_threadpool(create)
+    except QueueFull as exc:
+        raise HTTPException(
+            429,
+            f"{exc.active} jobs are queued or running, the most this service takes "
+            f"(MODSAT_MAX_ACTIVE_JOBS = {settings.max_active_jobs}); submit again when some "
+            "have ended",
+            headers={"Retry-After": "60"},
+        ) from None
     return JSONResponse(job.model_dump(mode="json"), status_code=201, headers={"Location": job.url})
 
 

@@ -25,6 +25,7 @@ from modsat_core.spec.study import (
     seed_problem,
     study_specs,
 )
+from worker.db import QueueFull
 
 from .deps import SettingsDep, StoreDep, WriteAccess
 from .schemas import JobStatus, _time
@@ -158,14 +159,6 @@ async def submit_study(request: Request, store: StoreDep, settings: SettingsDep)
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
         return invalid_response(exc)
-    active = await run_in_threadpool(store.active_count)
-    if active + len(specs) > settings.max_active_jobs:
-        raise HTTPException(
-            429,
-            f"this study queues {len(specs)} jobs and {active} are queued or running; the service takes "
-            f"{settings.max_active_jobs} at once (MODSAT_MAX_ACTIVE_JOBS)",
-            headers={"Retry-After": "60"},
-        )
 
     def create() -> StudyDetail:
         sid, _ = store.submit_study(
@@ -175,12 +168,21 @@ async def submit_study(request: Request, store: StoreDep, settings: SettingsDep)
             algorithms=algs,
             job_specs=[(s.algorithm, s.seed, s.model_dump_json(), s.training.total_env_steps) for s in specs],
             max_attempts=settings.max_attempts,
+            max_active=settings.max_active_jobs,
         )
         detail = _detail(store, sid)
         assert detail is not None  # just created
         return detail
 
-    detail = await run_in_threadpool(create)
+    try:
+        detail = await run_in_threadpool(create)
+    except QueueFull as exc:
+        raise HTTPException(
+            429,
+            f"this study queues {len(specs)} jobs and {exc.active} are queued or running; the service takes "
+            f"{settings.max_active_jobs} at once (MODSAT_MAX_ACTIVE_JOBS)",
+            headers={"Retry-After": "60"},
+        ) from None
     return JSONResponse(detail.model_dump(mode="json"), status_code=201, headers={"Location": detail.url})
 
 

@@ -10,6 +10,8 @@ Only the URL differs between the two. Two dialect details are handled here, once
 * Job ids are never given twice: ``AUTOINCREMENT`` on SQLite (without it SQLite hands the
   largest id out again once its job is deleted), a sequence on PostgreSQL.
   :func:`migrate_sqlite` rebuilds the jobs table of a store created before that.
+* Submissions hold the queue (:func:`hold_queue`) from counting its active jobs to inserting
+  theirs, so parallel submissions cannot take it past its cap.
 """
 
 from __future__ import annotations
@@ -33,7 +35,9 @@ from sqlalchemy import (
     Text,
     create_engine,
     event,
+    func,
     insert,
+    select,
     text,
 )
 from sqlalchemy.engine import make_url
@@ -177,6 +181,35 @@ def _db_now_sqlite(element, compiler, **kw):
 @compiles(db_now, "postgresql")
 def _db_now_postgresql(element, compiler, **kw):
     return "CAST(EXTRACT(EPOCH FROM clock_timestamp()) AS DOUBLE PRECISION)"
+
+
+class QueueFull(Exception):
+    """A submission would take the queue past its cap; ``active`` jobs are queued or running."""
+
+    def __init__(self, active: int):
+        self.active = active
+        super().__init__(f"{active} jobs are queued or running")
+
+
+#: The key of the PostgreSQL advisory lock that submissions hold (any constant; "modsat" in ASCII).
+_QUEUE_LOCK_KEY = 0x6D6F64736174
+
+
+def hold_queue(conn: Connection, adding: int, max_active: int | None) -> None:
+    """In a write transaction, before inserting ``adding`` jobs: wait until no other submission
+    is between its count and its insert, then raise :class:`QueueFull` if the jobs do not fit.
+
+    SQLite's write transactions already run one at a time (``BEGIN IMMEDIATE``); PostgreSQL's
+    take a transaction-level advisory lock, released at commit or rollback."""
+    if max_active is None:
+        return
+    if conn.dialect.name == "postgresql":
+        conn.execute(select(func.pg_advisory_xact_lock(_QUEUE_LOCK_KEY)))
+    active = conn.execute(
+        select(func.count()).select_from(jobs).where(jobs.c.status.in_(("queued", "running")))
+    ).scalar_one()
+    if active + adding > max_active:
+        raise QueueFull(int(active))
 
 
 def insert_job(

@@ -47,6 +47,7 @@ from .db import (
     artifacts,
     attempts,
     db_now,
+    hold_queue,
     insert_job,
     jobs,
     make_engine,
@@ -165,10 +166,19 @@ class JobStore(StudyQueries):
     # ------------------------------------------------------------------ submit and read
 
     def submit(
-        self, spec_json: str, *, name: str | None, algorithm: str, total_env_steps: int, max_attempts: int
+        self,
+        spec_json: str,
+        *,
+        name: str | None,
+        algorithm: str,
+        total_env_steps: int,
+        max_attempts: int,
+        max_active: int | None = None,
     ) -> int:
-        """Queue a job; returns its id."""
+        """Queue a job; returns its id. With ``max_active``, raises :class:`QueueFull` instead
+        when that many jobs are queued or running (counted and inserted in one step)."""
         with self._write() as conn:
+            hold_queue(conn, 1, max_active)
             return insert_job(conn, spec_json, name, algorithm, total_env_steps, max_attempts)
 
     def get_job(self, job_id: int) -> dict[str, Any] | None:

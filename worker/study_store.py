@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import Connection, func, insert, select
 
-from .db import db_now, insert_job, jobs, studies, study_jobs
+from .db import db_now, hold_queue, insert_job, jobs, studies, study_jobs
 
 MAX_ID = 2**63 - 1
 
@@ -42,10 +42,13 @@ class StudyQueries:
         algorithms: list[str],
         job_specs: list[tuple[str, int, str, int]],
         max_attempts: int,
+        max_active: int | None = None,
     ) -> tuple[int, list[int]]:
         """Create a study and queue its jobs, all or nothing. ``job_specs``: (algorithm, seed,
-        spec JSON, total env steps) per job. Returns (study id, job ids)."""
+        spec JSON, total env steps) per job. Returns (study id, job ids). With ``max_active``,
+        raises :class:`~worker.db.QueueFull` when its jobs do not all fit in the queue."""
         with self._write() as conn:
+            hold_queue(conn, len(job_specs), max_active)
             sid = int(
                 conn.execute(
                     insert(studies)

@@ -5,6 +5,7 @@ queue cap, deleting jobs, conditional downloads, JSON 404s, the OpenAPI security
 from __future__ import annotations
 
 import json
+import threading
 
 import httpx
 import pytest
@@ -251,3 +252,26 @@ def test_cursor_pages_do_not_shift_when_jobs_arrive(start_server, sqlite_url):
     last = s.client.get("/api/jobs", params={"limit": 2, "before_id": second["next_before_id"]}).json()
     assert [j["id"] for j in last["items"]] == [ids[0]] and last["next_before_id"] is None
     assert s.client.get("/api/jobs", params={"before_id": 0}).status_code == 422
+
+
+@pytest.mark.parametrize("path", ["/api/jobs", "/api/studies"])
+def test_queue_cap_holds_under_parallel_submissions(start_server, any_db_url, path):
+    """25 clients submit at once into a queue with room for 3: exactly 3 are queued, the others
+    get 429 (the count and the insert are one step, on SQLite and PostgreSQL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    s = start_server(any_db_url, env={"MODSAT_MAX_ACTIVE_JOBS": "10"})
+    for _ in range(7):
+        assert s.client.post("/api/jobs", json=TINY).status_code == 201
+    body = TINY if path == "/api/jobs" else {"spec": TINY, "seeds": [0], "algorithms": ["td3-codesign"]}
+    barrier = threading.Barrier(25)
+
+    def submit(_: int) -> int:
+        with httpx.Client(base_url=s.base, timeout=60) as c:
+            barrier.wait()
+            return c.post(path, json=body).status_code
+
+    with ThreadPoolExecutor(25) as pool:
+        codes = sorted(pool.map(submit, range(25)))
+    assert codes == [201] * 3 + [429] * 22
+    assert s.client.get("/api/jobs", params={"status": ["queued", "running"]}).json()["total"] == 10

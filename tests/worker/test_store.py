@@ -336,3 +336,31 @@ def test_an_older_sqlite_store_is_migrated_and_keeps_its_jobs(tmp_path):
         assert submit(store) == ids[2] + 1, "after the migration a deleted id is not given again"
     finally:
         store.dispose()
+
+
+def test_queue_cap_holds_under_parallel_submissions(store):
+    """Counting the active jobs and queueing one are one step: parallel submissions never
+    take the queue past its cap."""
+    from worker.db import QueueFull
+
+    for _ in range(7):
+        submit(store)
+    outcomes: list[str] = []
+    barrier = threading.Barrier(12)
+
+    def one() -> None:
+        barrier.wait()
+        try:
+            store.submit("{}", name=None, algorithm="ga", total_env_steps=1, max_attempts=1, max_active=10)
+            outcomes.append("queued")
+        except QueueFull as exc:
+            assert exc.active == 10
+            outcomes.append("full")
+
+    threads = [threading.Thread(target=one) for _ in range(12)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(outcomes) == ["full"] * 9 + ["queued"] * 3
+    assert store.active_count() == 10
