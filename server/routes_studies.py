@@ -28,7 +28,7 @@ from modsat_core.spec.study import (
 from worker.db import QueueFull
 
 from .deps import SettingsDep, StoreDep, WriteAccess
-from .schemas import JobStatus, _time
+from .schemas import JobStatus, StudyId, _time
 from .submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
@@ -148,7 +148,13 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
             },
         }
     },
-    responses={400: {"description": "Body is not JSON"}, 422: {"description": "Invalid; `messages` name each field"}},
+    responses={
+        400: {"description": "Body is not UTF-8 JSON"},
+        401: {"description": "Missing or wrong bearer token"},
+        415: {"description": "Body not sent as `application/json` (UTF-8)"},
+        422: {"description": "Invalid; `messages` name each field"},
+        429: {"description": "The queue has no room for all of the study's jobs (`MODSAT_MAX_ACTIVE_JOBS`)"},
+    },
 )
 async def submit_study(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
     """Queue one job per seed and algorithm, all or none. A study over the queue's room is 429."""
@@ -268,7 +274,7 @@ def list_studies(
 
 
 @router.get("/{study_id}", response_model=StudyDetail, responses=_ERRORS)
-def get_study(study_id: int, store: StoreDep) -> StudyDetail:
+def get_study(study_id: StudyId, store: StoreDep) -> StudyDetail:
     """The study's jobs (status, progress) and the aggregate over the seeds of each method so far."""
     detail = _detail(store, study_id)
     if detail is None:
@@ -281,7 +287,7 @@ def get_study(study_id: int, store: StoreDep) -> StudyDetail:
     responses={**_ERRORS, 200: {"content": {"image/png": {}}, "description": "The learning curves"}},
     response_class=Response,
 )
-def study_figure(study_id: int, store: StoreDep) -> Response:
+def study_figure(study_id: StudyId, store: StoreDep) -> Response:
     """Learning curves of each method against env steps, mean ± std over seeds, as they fill in."""
     detail = _detail(store, study_id)
     if detail is None:
