@@ -230,6 +230,10 @@ def _openapi(app: FastAPI, token: bool):
         comps["JobSpec"] = spec_schema
         comps["PresetSubmission"] = PresetSubmission.model_json_schema(ref_template="#/components/schemas/{model}")
         comps["StudySubmission"] = StudySubmission.model_json_schema(ref_template="#/components/schemas/{model}")
+        comps["StudySubmission"]["properties"]["spec"] = {  # read by hand like the body of POST /api/jobs
+            "oneOf": [{"$ref": "#/components/schemas/JobSpec"}, {"$ref": "#/components/schemas/PresetSubmission"}],
+            "description": comps["StudySubmission"]["properties"]["spec"]["description"],
+        }
         for ops in schema.get("paths", {}).values():
             for method, op in ops.items():
                 responses = op.setdefault("responses", {})

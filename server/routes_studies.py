@@ -18,6 +18,7 @@ from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, run
 from modsat_core.spec.jobspec import JobSpec, SpecError
 from modsat_core.spec.limits import check as check_limits
 from modsat_core.spec.study import (
+    ALGORITHMS,
     DEFAULT_ALGORITHMS,
     MAX_SEEDS,
     algorithm_problem,
@@ -41,9 +42,18 @@ class StudySubmission(BaseModel):
     seed and algorithm; every job is the spec with its own ``seed`` and ``algorithm``."""
 
     spec: dict[str, Any] = Field(description='A JobSpec, or {"preset": NAME, "overrides": {...}}.')
-    seeds: list[int] = Field(description=f"1 to {MAX_SEEDS} distinct seeds.", examples=[[0, 1, 2]])
-    algorithms: list[Literal["td3-codesign", "ga"]] = Field(
-        default=["td3-codesign", "ga"], description="RL co-design and/or its GA twin."
+    seeds: list[Annotated[int, Field(ge=0, lt=2**31)]] = Field(
+        min_length=1,
+        max_length=MAX_SEEDS,
+        description=f"1 to {MAX_SEEDS} distinct seeds.",
+        examples=[[0, 1, 2]],
+        json_schema_extra={"uniqueItems": True},
+    )
+    algorithms: list[Literal[ALGORITHMS]] = Field(  # type: ignore[valid-type]
+        default=list(DEFAULT_ALGORITHMS),
+        min_length=1,
+        description="RL co-design and/or its GA twin (or the controllers of a fixed design); distinct.",
+        json_schema_extra={"uniqueItems": True},
     )
 
 

@@ -56,8 +56,9 @@ class PresetSubmission(BaseModel):
     )
 
     preset: str = Field(description="Name of a preset (GET /api/presets).", json_schema_extra={"enum": list(PRESETS)})
-    overrides: dict[str, Any] = Field(
-        default_factory=dict, description="Fields of the spec to change, nested like the spec; merged into the preset."
+    overrides: dict[str, Any] | None = Field(
+        default_factory=dict,
+        description="Fields of the spec to change, nested like the spec; merged into the preset (null: none).",
     )
 
 
