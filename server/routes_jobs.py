@@ -1,5 +1,5 @@
 """``/api/jobs``: submit, list, get, metrics, events, cancel, artefacts. Routes stay short:
-the SQL is in worker/store.py."""
+the SQL is in worker/store/."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The queue protocol of worker/store.py on a real database (SQLite and PostgreSQL):
+"""The job store (worker/store/) on a real database (SQLite and PostgreSQL):
 atomic claims, leases, the reaper, retries, cancellation, fencing, metrics and artefacts."""
 
 from __future__ import annotations

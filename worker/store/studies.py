@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
-from contextlib import AbstractContextManager
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from sqlalchemy import Connection, func, insert, select
+from sqlalchemy import func, insert, select
 
-from .db import db_now, hold_queue, insert_job, jobs, studies, study_jobs
-
-MAX_ID = 2**63 - 1
+from ..db import db_now, hold_queue, insert_job, jobs, studies, study_jobs
+from .base import StoreBase, valid_id
 
 #: What a study shows of each of its jobs.
 _JOB_COLUMNS = [
@@ -26,12 +23,8 @@ _JOB_COLUMNS = [
 ]
 
 
-class StudyQueries:
-    """Mixed into :class:`worker.store.JobStore` (which provides the transactions)."""
-
-    if TYPE_CHECKING:  # provided by JobStore
-        _write: Callable[[], AbstractContextManager[Connection]]
-        _read: Callable[[], AbstractContextManager[Connection]]
+class StudyQueries(StoreBase):
+    """A study and its jobs are created in one transaction."""
 
     def submit_study(
         self,
@@ -71,7 +64,7 @@ class StudyQueries:
 
     def get_study(self, study_id: int) -> dict[str, Any] | None:
         """The study's row with ``jobs``: each job's id, algorithm, seed, status and progress."""
-        if not 1 <= study_id <= MAX_ID:
+        if not valid_id(study_id):
             return None
         with self._read() as conn:
             row = conn.execute(select(studies).where(studies.c.id == study_id)).mappings().first()
