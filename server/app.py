@@ -17,8 +17,10 @@ from fastapi import APIRouter, FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
+from fastapi.routing import APIRoute
 from sqlalchemy.exc import OperationalError, SQLAlchemyError
 from sqlalchemy.exc import TimeoutError as SQLAlchemyTimeoutError
+from starlette.routing import Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import modsat_core
@@ -30,7 +32,7 @@ from .deps import StoreDep
 from .routes_jobs import router as jobs_router
 from .routes_studies import StudySubmission
 from .routes_studies import router as studies_router
-from .schemas import Health, PresetInfo, PresetSubmission
+from .schemas import Health, PresetInfo, PresetSubmission, clip
 from .security import CrossSiteGuard
 from .settings import ServerSettings
 from .viewer import mount_static, start_viewer, viewer_router
@@ -151,7 +153,7 @@ def _misc_router() -> APIRouter:
     def get_preset(name: str) -> JobSpec:
         """One preset as a whole JobSpec (edit it and POST it to /api/jobs)."""
         if name not in PRESETS:
-            raise HTTPException(404, f"no preset named {name!r}; known: {', '.join(PRESETS)}")
+            raise HTTPException(404, f"no preset named {clip(name)}; known: {', '.join(PRESETS)}")
         return PRESETS[name]
 
     @r.get("/schema", tags=["specs"])
@@ -174,15 +176,45 @@ def _misc_router() -> APIRouter:
     return r
 
 
-def _api_not_found() -> APIRouter:
-    """Unknown paths under /api get a JSON 404 (not the web UI's static 404), whatever the method."""
+def _api_not_found(routers: list[APIRouter]) -> APIRouter:
+    """Requests under /api that no route of ``routers`` takes get JSON (not the web UI's static
+    404): 405 with ``Allow`` for a path that exists with other methods, 404 for an unknown path.
+
+    Starlette would answer the 405 itself if the web UI, mounted at ``/``, did not take every path."""
     r = APIRouter(prefix="/api", include_in_schema=False)
 
-    @r.api_route("/{path:path}", methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE"])
-    def unknown(path: str) -> JSONResponse:
+    @r.api_route("/{path:path}", methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"])
+    def unknown(path: str, request: Request) -> JSONResponse:
+        allowed = sorted(
+            {
+                method
+                for router in routers
+                for route in router.routes
+                if isinstance(route, APIRoute) and route.matches(request.scope)[0] != Match.NONE
+                for method in route.methods or ()
+            }
+        )
+        if allowed:
+            return JSONResponse(
+                {"detail": f"/api/{path[:200]} does not take {request.method}; it takes {', '.join(allowed)}"},
+                status_code=405,
+                headers={"Allow": ", ".join(allowed)},
+            )
         return JSONResponse({"detail": f"no API endpoint /api/{path[:200]}; see /api/docs"}, status_code=404)
 
     return r
+
+
+#: Answers that come from the middleware and the error handlers rather than from a route; the
+#: OpenAPI schema lists them on the operations they can reach.
+_EVERY_OPERATION: dict[str, dict[str, str]] = {
+    "400": {"description": "A `Host` this server does not answer to (or an unreadable `Content-Length`)"},
+    "413": {"description": "Request body over `MODSAT_MAX_BODY_BYTES`"},
+    "503": {"description": "The job database is unavailable or busy; try again (`Retry-After`)"},
+}
+_WRITES: dict[str, dict[str, str]] = {
+    "403": {"description": "A write from a page of another origin"},
+}
 
 
 def _openapi(app: FastAPI, token: bool):
@@ -198,13 +230,22 @@ def _openapi(app: FastAPI, token: bool):
         comps["JobSpec"] = spec_schema
         comps["PresetSubmission"] = PresetSubmission.model_json_schema(ref_template="#/components/schemas/{model}")
         comps["StudySubmission"] = StudySubmission.model_json_schema(ref_template="#/components/schemas/{model}")
-        if not token:  # an open server: no operation needs the bearer token, so none declares it
+        comps["StudySubmission"]["properties"]["spec"] = {  # read by hand like the body of POST /api/jobs
+            "oneOf": [{"$ref": "#/components/schemas/JobSpec"}, {"$ref": "#/components/schemas/PresetSubmission"}],
+            "description": comps["StudySubmission"]["properties"]["spec"]["description"],
+        }
+        for ops in schema.get("paths", {}).values():
+            for method, op in ops.items():
+                responses = op.setdefault("responses", {})
+                for code, response in (_EVERY_OPERATION | (_WRITES if method in ("post", "delete") else {})).items():
+                    responses.setdefault(code, response)
+                if not token:  # an open server: no operation needs the bearer token, so none declares it
+                    op.pop("security", None)
+                    responses.pop("401", None)
+                elif "security" in op:
+                    responses.setdefault("401", {"description": "Missing or wrong bearer token"})
+        if not token:
             schema["components"].pop("securitySchemes", None)
-            for ops in schema.get("paths", {}).values():
-                for op in ops.values():
-                    if isinstance(op, dict):
-                        op.pop("security", None)
-                        op.get("responses", {}).pop("401", None)
         app.openapi_schema = schema
         return schema
 
@@ -252,11 +293,10 @@ def create_app(
     if store is not None:
         app.state.store = store
     _install_error_handlers(app)
-    app.include_router(jobs_router)
-    app.include_router(studies_router)
-    app.include_router(_misc_router())
-    app.include_router(viewer_router())
-    app.include_router(_api_not_found())
+    routers = [jobs_router, studies_router, _misc_router(), viewer_router()]
+    for router in routers:
+        app.include_router(router)
+    app.include_router(_api_not_found(routers))
     mount_static(app, settings)
 
     # FastAPI's documented way to customise the schema is to replace the method.

@@ -1,5 +1,5 @@
 """``/api/jobs``: submit, list, get, metrics, events, cancel, artefacts. Routes stay short:
-the SQL is in worker/store.py."""
+the SQL is in worker/store/."""
 
 from __future__ import annotations
 
@@ -14,17 +14,19 @@ from fastapi.responses import JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from modsat_core.spec.limits import check as check_limits
-from worker.db import TERMINAL_STATUSES
+from worker.db import TERMINAL_STATUSES, QueueFull
 
 from .deps import SettingsDep, StoreDep, WriteAccess
 from .schemas import (
     ArtifactInfo,
     CancelResult,
     JobDetail,
+    JobId,
     JobList,
     JobStatus,
     MetricsPage,
     artifact_info,
+    clip,
     job_detail,
     job_summary,
     metrics_point,
@@ -71,10 +73,12 @@ def _detail(store, job_id: int) -> JobDetail | None:
     dependencies=[WriteAccess],
     openapi_extra={"requestBody": _SUBMIT_BODY},
     responses={
-        400: {"description": "Body is not JSON"},
+        400: {"description": "Body is not UTF-8 JSON"},
         401: {"description": "Missing or wrong bearer token"},
         413: {"description": "Body too large"},
+        415: {"description": "Body not sent as `application/json` (UTF-8)"},
         422: {"description": "Invalid spec; `messages` name each field"},
+        429: {"description": "The queue is full (`MODSAT_MAX_ACTIVE_JOBS`); `Retry-After` says when to try again"},
     },
 )
 async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
@@ -95,15 +99,6 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
         return invalid_response(exc)
-    active = await run_in_threadpool(store.active_count)
-    if active >= settings.max_active_jobs:
-        raise HTTPException(
-            429,
-            f"{active} jobs are queued or running, the most this service takes "
-            f"(MODSAT_MAX_ACTIVE_JOBS = {settings.max_active_jobs}); submit again when some "
-            "have ended",
-            headers={"Retry-After": "60"},
-        )
 
     def create() -> JobDetail:
         job_id = store.submit(
@@ -112,12 +107,22 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
             algorithm=spec.algorithm,
             total_env_steps=spec.training.total_env_steps,
             max_attempts=settings.max_attempts,
+            max_active=settings.max_active_jobs,
         )
         job = _detail(store, job_id)
         assert job is not None  # the row was just inserted
         return job
 
-    job = await run_in_threadpool(create)
+    try:
+        job = await run_in_threadpool(create)
+    except QueueFull as exc:
+        raise HTTPException(
+            429,
+            f"{exc.active} jobs are queued or running, the most this service takes "
+            f"(MODSAT_MAX_ACTIVE_JOBS = {settings.max_active_jobs}); submit again when some "
+            "have ended",
+            headers={"Retry-After": "60"},
+        ) from None
     return JSONResponse(job.model_dump(mode="json"), status_code=201, headers={"Location": job.url})
 
 
@@ -152,7 +157,7 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobDetail, responses=_ERRORS)
-def get_job(job_id: int, store: StoreDep) -> JobDetail:
+def get_job(job_id: JobId, store: StoreDep) -> JobDetail:
     """Status, progress, latest metrics, evaluation summary, error and attempts of one job."""
     job = _detail(store, job_id)
     if job is None:
@@ -162,7 +167,7 @@ def get_job(job_id: int, store: StoreDep) -> JobDetail:
 
 @router.get("/{job_id}/metrics", response_model=MetricsPage, responses=_ERRORS)
 def get_metrics(
-    job_id: int,
+    job_id: JobId,
     store: StoreDep,
     after: Annotated[int, Query(ge=0, le=2**31 - 1, description="Only rows with seq > after.")] = 0,
     limit: Annotated[int, Query(ge=1, le=5000)] = 1000,
@@ -193,7 +198,7 @@ def _sse(event: str, data: str, event_id: int | None = None) -> str:
     responses={**_ERRORS, 200: {"content": {"text/event-stream": {}}, "description": "Server-sent events"}},
 )
 async def job_events(
-    job_id: int,
+    job_id: JobId,
     request: Request,
     store: StoreDep,
     settings: SettingsDep,
@@ -259,7 +264,7 @@ async def job_events(
         409: {"description": "The job has already ended"},
     },
 )
-def cancel_job(job_id: int, store: StoreDep, response: Response) -> CancelResult:
+def cancel_job(job_id: JobId, store: StoreDep, response: Response) -> CancelResult:
     """Cancel a queued job (at once) or a running one (its worker stops it within a heartbeat)."""
     outcome = store.request_cancel(job_id)
     if outcome is None:
@@ -286,7 +291,7 @@ def cancel_job(job_id: int, store: StoreDep, response: Response) -> CancelResult
         409: {"description": "The job is running; cancel it first"},
     },
 )
-def delete_job(job_id: int, store: StoreDep) -> Response:
+def delete_job(job_id: JobId, store: StoreDep) -> Response:
     """Delete a job that is not running (queued or ended) with its metrics and files. A
     running job is 409: cancel it, and delete it once its worker has stopped it."""
     outcome = store.delete_job(job_id)
@@ -305,7 +310,7 @@ _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
 
 
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactInfo], responses=_ERRORS)
-def list_artifacts(job_id: int, store: StoreDep) -> list[ArtifactInfo]:
+def list_artifacts(job_id: JobId, store: StoreDep) -> list[ArtifactInfo]:
     """Files of the job: outputs of a finished run (policy, export, design, evaluation,
     trajectories, curve, the `.viser` 3D recording) and, while it runs, its latest checkpoint."""
     if store.job_state(job_id) is None:
@@ -315,10 +320,14 @@ def list_artifacts(job_id: int, store: StoreDep) -> list[ArtifactInfo]:
 
 @router.get(
     "/{job_id}/artifacts/{name}",
-    responses={**_ERRORS, 200: {"content": {"application/octet-stream": {}}, "description": "The file"}},
+    responses={
+        **_ERRORS,
+        200: {"content": {"application/octet-stream": {}}, "description": "The file"},
+        304: {"description": "`If-None-Match` names the file's ETag: not sent again"},
+    },
 )
 def download_artifact(
-    job_id: int,
+    job_id: JobId,
     name: str,
     store: StoreDep,
     if_none_match: Annotated[str | None, Header(include_in_schema=False)] = None,
@@ -329,7 +338,7 @@ def download_artifact(
     if info is None:
         if store.job_state(job_id) is None:
             raise _unknown(job_id)
-        raise HTTPException(404, f"job {job_id} has no artefact named {name!r}; see /api/jobs/{job_id}/artifacts")
+        raise HTTPException(404, f"job {job_id} has no artefact named {clip(name)}; see /api/jobs/{job_id}/artifacts")
     etag = f'"{info["sha256"]}"'
     if if_none_match is not None and (
         if_none_match.strip() == "*" or etag in {t.strip().removeprefix("W/") for t in if_none_match.split(",")}

@@ -18,6 +18,7 @@ from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, run
 from modsat_core.spec.jobspec import JobSpec, SpecError
 from modsat_core.spec.limits import check as check_limits
 from modsat_core.spec.study import (
+    ALGORITHMS,
     DEFAULT_ALGORITHMS,
     MAX_SEEDS,
     algorithm_problem,
@@ -25,9 +26,10 @@ from modsat_core.spec.study import (
     seed_problem,
     study_specs,
 )
+from worker.db import QueueFull
 
 from .deps import SettingsDep, StoreDep, WriteAccess
-from .schemas import JobStatus, _time
+from .schemas import JobStatus, StudyId, _time
 from .submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
@@ -40,9 +42,18 @@ class StudySubmission(BaseModel):
     seed and algorithm; every job is the spec with its own ``seed`` and ``algorithm``."""
 
     spec: dict[str, Any] = Field(description='A JobSpec, or {"preset": NAME, "overrides": {...}}.')
-    seeds: list[int] = Field(description=f"1 to {MAX_SEEDS} distinct seeds.", examples=[[0, 1, 2]])
-    algorithms: list[Literal["td3-codesign", "ga"]] = Field(
-        default=["td3-codesign", "ga"], description="RL co-design and/or its GA twin."
+    seeds: list[Annotated[int, Field(ge=0, lt=2**31)]] = Field(
+        min_length=1,
+        max_length=MAX_SEEDS,
+        description=f"1 to {MAX_SEEDS} distinct seeds.",
+        examples=[[0, 1, 2]],
+        json_schema_extra={"uniqueItems": True},
+    )
+    algorithms: list[Literal[ALGORITHMS]] = Field(  # type: ignore[valid-type]
+        default=list(DEFAULT_ALGORITHMS),
+        min_length=1,
+        description="RL co-design and/or its GA twin (or the controllers of a fixed design); distinct.",
+        json_schema_extra={"uniqueItems": True},
     )
 
 
@@ -147,7 +158,13 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
             },
         }
     },
-    responses={400: {"description": "Body is not JSON"}, 422: {"description": "Invalid; `messages` name each field"}},
+    responses={
+        400: {"description": "Body is not UTF-8 JSON"},
+        401: {"description": "Missing or wrong bearer token"},
+        415: {"description": "Body not sent as `application/json` (UTF-8)"},
+        422: {"description": "Invalid; `messages` name each field"},
+        429: {"description": "The queue has no room for all of the study's jobs (`MODSAT_MAX_ACTIVE_JOBS`)"},
+    },
 )
 async def submit_study(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
     """Queue one job per seed and algorithm, all or none. A study over the queue's room is 429."""
@@ -158,14 +175,6 @@ async def submit_study(request: Request, store: StoreDep, settings: SettingsDep)
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
         return invalid_response(exc)
-    active = await run_in_threadpool(store.active_count)
-    if active + len(specs) > settings.max_active_jobs:
-        raise HTTPException(
-            429,
-            f"this study queues {len(specs)} jobs and {active} are queued or running; the service takes "
-            f"{settings.max_active_jobs} at once (MODSAT_MAX_ACTIVE_JOBS)",
-            headers={"Retry-After": "60"},
-        )
 
     def create() -> StudyDetail:
         sid, _ = store.submit_study(
@@ -175,12 +184,21 @@ async def submit_study(request: Request, store: StoreDep, settings: SettingsDep)
             algorithms=algs,
             job_specs=[(s.algorithm, s.seed, s.model_dump_json(), s.training.total_env_steps) for s in specs],
             max_attempts=settings.max_attempts,
+            max_active=settings.max_active_jobs,
         )
         detail = _detail(store, sid)
         assert detail is not None  # just created
         return detail
 
-    detail = await run_in_threadpool(create)
+    try:
+        detail = await run_in_threadpool(create)
+    except QueueFull as exc:
+        raise HTTPException(
+            429,
+            f"this study queues {len(specs)} jobs and {exc.active} are queued or running; the service takes "
+            f"{settings.max_active_jobs} at once (MODSAT_MAX_ACTIVE_JOBS)",
+            headers={"Retry-After": "60"},
+        ) from None
     return JSONResponse(detail.model_dump(mode="json"), status_code=201, headers={"Location": detail.url})
 
 
@@ -266,7 +284,7 @@ def list_studies(
 
 
 @router.get("/{study_id}", response_model=StudyDetail, responses=_ERRORS)
-def get_study(study_id: int, store: StoreDep) -> StudyDetail:
+def get_study(study_id: StudyId, store: StoreDep) -> StudyDetail:
     """The study's jobs (status, progress) and the aggregate over the seeds of each method so far."""
     detail = _detail(store, study_id)
     if detail is None:
@@ -279,7 +297,7 @@ def get_study(study_id: int, store: StoreDep) -> StudyDetail:
     responses={**_ERRORS, 200: {"content": {"image/png": {}}, "description": "The learning curves"}},
     response_class=Response,
 )
-def study_figure(study_id: int, store: StoreDep) -> Response:
+def study_figure(study_id: StudyId, store: StoreDep) -> Response:
     """Learning curves of each method against env steps, mean ± std over seeds, as they fill in."""
     detail = _detail(store, study_id)
     if detail is None:

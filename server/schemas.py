@@ -3,15 +3,35 @@
 from __future__ import annotations
 
 import json
+import re
 from datetime import datetime, timezone
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from fastapi import Path
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 
 from modsat_core.artefacts import CurvePoint, ProgressRecord, RunSummary
 from modsat_core.spec.presets import PRESETS
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+
+
+def _digits(value: Any) -> Any:
+    """An id in a path is written in digits: ``1.0``, ``1e0`` or ``+1`` name no job (pydantic's
+    lax mode would read them as 1)."""
+    if isinstance(value, str) and not re.fullmatch(r"-?[0-9]+", value):
+        raise ValueError("an id is a whole number written in digits, e.g. 12")
+    return value
+
+
+JobId = Annotated[int, BeforeValidator(_digits), Path(description="The job's id.")]
+StudyId = Annotated[int, BeforeValidator(_digits), Path(description="The study's id.")]
+
+
+def clip(text: str, limit: int = 100) -> str:
+    """``text`` quoted for an error message, cut to ``limit`` characters: an error does not
+    echo a long request back."""
+    return repr(text) if len(text) <= limit else f"{text[:limit]!r}... ({len(text)} characters)"
 
 
 def _time(t: float | None) -> datetime | None:
@@ -36,8 +56,9 @@ class PresetSubmission(BaseModel):
     )
 
     preset: str = Field(description="Name of a preset (GET /api/presets).", json_schema_extra={"enum": list(PRESETS)})
-    overrides: dict[str, Any] = Field(
-        default_factory=dict, description="Fields of the spec to change, nested like the spec; merged into the preset."
+    overrides: dict[str, Any] | None = Field(
+        default_factory=dict,
+        description="Fields of the spec to change, nested like the spec; merged into the preset (null: none).",
     )
 
 

@@ -10,6 +10,7 @@ Two body forms (docs/service.md):
 
 from __future__ import annotations
 
+import codecs
 import json
 import logging
 from typing import Any
@@ -48,11 +49,17 @@ def merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
 
 
 def json_content_type(content_type: str | None) -> None:
-    """415 unless the body is sent as application/json. Also a guard: a page of another site can
-    send text/plain or a form without asking first."""
-    ctype = (content_type or "").split(";")[0].strip().lower()
+    """415 unless the body is sent as application/json (in UTF-8, the only charset JSON has). Also
+    a guard: a page of another site can send text/plain or a form without asking first."""
+    ctype, *params = (content_type or "").split(";")
+    ctype = ctype.strip().lower()
     if ctype != "application/json":
         raise HTTPException(415, f"send the body as application/json (Content-Type was {ctype[:80] or 'missing'!r})")
+    for param in params:
+        key, _, value = param.partition("=")
+        charset = value.strip().strip('"').lower()
+        if key.strip().lower() == "charset" and charset not in ("utf-8", "utf8"):
+            raise HTTPException(415, f"send the body as UTF-8 JSON (Content-Type said charset={charset[:40]!r})")
 
 
 def invalid_response(exc: Invalid) -> JSONResponse:
@@ -60,13 +67,37 @@ def invalid_response(exc: Invalid) -> JSONResponse:
     return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
 
 
+#: Byte order marks of the encodings that ``json.loads(bytes)`` would otherwise detect and accept.
+_BOMS = (
+    (codecs.BOM_UTF32_LE, "UTF-32"),  # before UTF-16 LE, whose mark it starts with
+    (codecs.BOM_UTF32_BE, "UTF-32"),
+    (codecs.BOM_UTF16_LE, "UTF-16"),
+    (codecs.BOM_UTF16_BE, "UTF-16"),
+)
+
+
+def _utf8(raw: bytes) -> str:
+    """The body as text: UTF-8 only (RFC 8259), a UTF-8 byte order mark tolerated."""
+    for bom, name in _BOMS:
+        if raw.startswith(bom):
+            raise BadRequest(f"the request body is {name} (it starts with a {name} byte order mark); send it as UTF-8")
+    if b"\x00" in raw:  # JSON text never holds a NUL byte; UTF-16 or UTF-32 without a mark does
+        raise BadRequest("the request body is not UTF-8 text (it holds NUL bytes: UTF-16 or UTF-32?); send it as UTF-8")
+    try:
+        return raw.removeprefix(codecs.BOM_UTF8).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise BadRequest(
+            f"the request body is not UTF-8 text (byte {exc.start} cannot be read); send it as UTF-8"
+        ) from None
+
+
 def decode_json(raw: bytes) -> Any:
+    """The JSON value of a request body; :class:`BadRequest` saying what is wrong otherwise."""
     if not raw.strip():
         raise BadRequest('the request body is empty; send a JobSpec or {"preset": NAME} as JSON')
+    text = _utf8(raw)
     try:
-        return json.loads(raw)
-    except UnicodeDecodeError:
-        raise BadRequest("the request body is not UTF-8 text") from None
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise BadRequest(
             f"the request body is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"

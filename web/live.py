@@ -11,14 +11,15 @@ websocket URL (the web page embeds viser's client with
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
+import inspect
 import logging
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
@@ -350,6 +351,51 @@ class Session:
             self.time_sl.value = float(round(t, 4))
 
 
+_PATCH_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _checked_handshakes(check: Callable[[Any, Any], Any]) -> Iterator[None]:
+    """Have the websocket server that viser starts meanwhile run ``check`` on every request
+    before viser's own ``process_request`` (its page, or the websocket's upgrade).
+
+    viser 1.1.1 builds its ``process_request`` inside its server thread and offers no hook
+    before the handshake; its connect callback comes after the 101 and the first messages.
+    So ``websockets.asyncio.server.serve`` is wrapped while viser starts (the ViserServer
+    constructor returns once the server listens). If viser started no server through it,
+    the viewer does not start: it would be unchecked."""
+    import websockets.asyncio.server as ws_server
+
+    serve = ws_server.serve
+    used = False
+
+    def checked_serve(*args, process_request=None, **kwargs):
+        nonlocal used
+        used = True
+
+        async def process(connection, request):
+            response = check(connection, request)
+            if response is None and process_request is not None:
+                response = process_request(connection, request)
+                if inspect.isawaitable(response):
+                    response = await response
+            return response
+
+        return serve(*args, process_request=process, **kwargs)
+
+    with _PATCH_LOCK:
+        ws_server.serve = checked_serve  # type: ignore[assignment,misc]
+        try:
+            yield
+        finally:
+            ws_server.serve = serve  # type: ignore[misc]
+    if not used:
+        raise RuntimeError(
+            "viser did not start its server through websockets.asyncio.server.serve; "
+            "the viewer's Host and Origin checks cannot be installed"
+        )
+
+
 class ViewerApp:
     """A viser server with one :class:`Session` per browser tab. Runs in viser's threads."""
 
@@ -369,7 +415,8 @@ class ViewerApp:
 
         self.source = source
         self.host_names = host_names(host, allowed_hosts) if isinstance(allowed_hosts, str) else allowed_hosts
-        self.server = viser.ViserServer(host=host, port=port, label=label)
+        with _checked_handshakes(self._handshake):
+            self.server = viser.ViserServer(host=host, port=port, label=label)
         self.server.scene.set_up_direction("+z")
         self.sessions: dict[int, Session] = {}
         self._cache: OrderedDict[str, RunData] = OrderedDict()
@@ -412,27 +459,33 @@ class ViewerApp:
         path = conn.request.path if conn is not None and conn.request is not None else ""
         return {k: v[-1] for k, v in parse_qs(urlsplit(path).query).items()}
 
-    def _refused(self, client) -> str | None:
-        """Why a tab may not connect: a foreign Host (DNS rebinding) or a page of another site."""
-        conn = self._connection(client)
-        if conn is None or conn.request is None:
-            return "no handshake to check"
-        headers = conn.request.headers
-        if not host_allowed(headers.get("Host"), self.host_names):
-            return f"host {headers.get('Host')!r} is not one this viewer answers to"
-        if not origin_allowed(headers.get("Origin"), self.host_names):
-            return f"a page of another site ({headers.get('Origin')!r})"
+    def _refused(self, headers) -> tuple[int, str] | None:
+        """Why a request may not be answered, as (HTTP status, reason): a repeated ``Host``,
+        ``Origin`` or ``Upgrade`` header, a foreign Host (DNS rebinding: for the page and the
+        websocket alike) or a websocket from a page of another site. ``headers``: websockets'."""
+        for name in ("Host", "Origin", "Upgrade"):
+            if len(headers.get_all(name)) > 1:
+                return 400, f"more than one {name} header"
+        host = headers.get("Host")
+        if not host_allowed(host, self.host_names):
+            return 400, f"host {(host or '')[:100]!r} is not one this viewer answers to"
+        origin = headers.get("Origin")
+        if (headers.get("Upgrade") or "").lower() == "websocket" and not origin_allowed(origin, self.host_names):
+            return 403, f"a page of another site ({origin[:100]!r})"
         return None
 
+    def _handshake(self, connection, request):
+        """websockets' ``process_request``, before viser's: a refused request gets its HTTP error
+        instead of the page or the websocket's 101 (no session, no message of the scene)."""
+        refused = self._refused(request.headers)
+        if refused is None:
+            return None
+        status, why = refused
+        what = "a websocket" if (request.headers.get("Upgrade") or "").lower() == "websocket" else "a request"
+        log.warning("viewer: refused %s: %s", what, why)
+        return connection.respond(status, f"refused: {why}\n")
+
     def _connect(self, client) -> None:
-        why = self._refused(client)
-        if why is not None:
-            log.warning("viewer: refused a websocket: %s", why)
-            conn = self._connection(client)
-            loop = getattr(self.server._websock_server, "_background_event_loop", None)  # viser 1.1.1
-            if conn is not None and loop is not None:  # plain callbacks run on viser's thread pool
-                asyncio.run_coroutine_threadsafe(conn.close(1008, "refused: " + why[:100]), loop)
-            return
         try:
             self.sessions[client.client_id] = Session(self, client, self._query(client))
         except Exception:  # a broken run must not take the viewer down

@@ -7,6 +7,11 @@ Only the URL differs between the two. Two dialect details are handled here, once
 * SQLite: WAL, a busy timeout, and ``BEGIN IMMEDIATE`` for write transactions (a
   transaction that reads first and then writes could otherwise fail with ``SQLITE_BUSY``
   instead of waiting). Read transactions use a plain ``BEGIN`` so readers never wait.
+* Job ids are never given twice: ``AUTOINCREMENT`` on SQLite (without it SQLite hands the
+  largest id out again once its job is deleted), a sequence on PostgreSQL.
+  :func:`migrate_sqlite` rebuilds the jobs table of a store created before that.
+* Submissions hold the queue (:func:`hold_queue`) from counting its active jobs to inserting
+  theirs, so parallel submissions cannot take it past its cap.
 """
 
 from __future__ import annotations
@@ -30,10 +35,14 @@ from sqlalchemy import (
     Text,
     create_engine,
     event,
+    func,
     insert,
+    select,
+    text,
 )
 from sqlalchemy.engine import make_url
 from sqlalchemy.ext.compiler import compiles
+from sqlalchemy.schema import CreateIndex, CreateTable
 from sqlalchemy.sql.functions import FunctionElement
 
 metadata = MetaData()
@@ -77,6 +86,7 @@ jobs = Table(
     Column("summary", Text),  # JSON evaluation summary of a succeeded run
     Column("error", Text),
     Column("error_detail", Text),  # traceback of the last failed attempt
+    sqlite_autoincrement=True,  # ids of deleted jobs are not given again
 )
 Index("ix_modsat_jobs_claim", jobs.c.status, jobs.c.id)
 
@@ -173,6 +183,35 @@ def _db_now_postgresql(element, compiler, **kw):
     return "CAST(EXTRACT(EPOCH FROM clock_timestamp()) AS DOUBLE PRECISION)"
 
 
+class QueueFull(Exception):
+    """A submission would take the queue past its cap; ``active`` jobs are queued or running."""
+
+    def __init__(self, active: int):
+        self.active = active
+        super().__init__(f"{active} jobs are queued or running")
+
+
+#: The key of the PostgreSQL advisory lock that submissions hold (any constant; "modsat" in ASCII).
+_QUEUE_LOCK_KEY = 0x6D6F64736174
+
+
+def hold_queue(conn: Connection, adding: int, max_active: int | None) -> None:
+    """In a write transaction, before inserting ``adding`` jobs: wait until no other submission
+    is between its count and its insert, then raise :class:`QueueFull` if the jobs do not fit.
+
+    SQLite's write transactions already run one at a time (``BEGIN IMMEDIATE``); PostgreSQL's
+    take a transaction-level advisory lock, released at commit or rollback."""
+    if max_active is None:
+        return
+    if conn.dialect.name == "postgresql":
+        conn.execute(select(func.pg_advisory_xact_lock(_QUEUE_LOCK_KEY)))
+    active = conn.execute(
+        select(func.count()).select_from(jobs).where(jobs.c.status.in_(("queued", "running")))
+    ).scalar_one()
+    if active + adding > max_active:
+        raise QueueFull(int(active))
+
+
 def insert_job(
     conn: Connection, spec_json: str, name: str | None, algorithm: str, total: int, max_attempts: int
 ) -> int:
@@ -200,6 +239,59 @@ def insert_job(
             .returning(jobs.c.id)
         ).scalar_one()
     )
+
+
+def migrate_sqlite(engine: Engine) -> None:
+    """Give the jobs table of a SQLite store created by an older modsat ``AUTOINCREMENT``.
+
+    SQLite cannot add it to a table, so the table is rebuilt in one transaction, the way the
+    SQLite documentation describes (ALTER TABLE, "other kinds of table schema changes"): foreign
+    keys off, a new table, the rows copied with their ids, the old table dropped, the new one
+    renamed, its index made again, the references checked. Ids deleted before the migration
+    may still come back once; none after it. Several processes may start at once: the check
+    is repeated under the write lock."""
+    if not _needs_autoincrement(engine):
+        return
+    new = jobs.to_metadata(MetaData(), name="modsat_jobs_new")
+    columns = ", ".join(c.name for c in jobs.c)
+    raw = engine.raw_connection()  # PRAGMA foreign_keys does nothing inside a transaction
+    try:
+        cur = raw.cursor()
+        cur.execute("PRAGMA foreign_keys = OFF")
+        try:
+            cur.execute("BEGIN IMMEDIATE")
+            try:
+                if _needs_autoincrement(cur):
+                    cur.execute(str(CreateTable(new).compile(dialect=engine.dialect)))
+                    cur.execute(f"INSERT INTO modsat_jobs_new ({columns}) SELECT {columns} FROM modsat_jobs")
+                    cur.execute("DROP TABLE modsat_jobs")
+                    cur.execute("ALTER TABLE modsat_jobs_new RENAME TO modsat_jobs")
+                    for index in jobs.indexes:
+                        cur.execute(str(CreateIndex(index).compile(dialect=engine.dialect)))
+                    broken = cur.execute("PRAGMA foreign_key_check").fetchall()
+                    if broken:
+                        raise RuntimeError(f"rebuilding modsat_jobs left rows without their job: {broken[:5]}")
+                cur.execute("COMMIT")
+            except BaseException:
+                cur.execute("ROLLBACK")
+                raise
+        finally:
+            cur.execute("PRAGMA foreign_keys = ON")
+            cur.close()
+    finally:
+        raw.close()
+
+
+def _needs_autoincrement(on) -> bool:
+    """Whether the SQLite jobs table exists without AUTOINCREMENT (``on``: an engine or a cursor)."""
+    query = "SELECT sql FROM sqlite_master WHERE type = 'table' AND name = 'modsat_jobs'"
+    if isinstance(on, Engine):
+        with on.connect() as conn:
+            ddl = conn.execute(text(query)).scalar()
+    else:
+        row = on.execute(query).fetchone()
+        ddl = row[0] if row else None
+    return ddl is not None and "AUTOINCREMENT" not in ddl.upper()
 
 
 def normalize_url(url: str) -> str:

@@ -5,6 +5,7 @@ queue cap, deleting jobs, conditional downloads, JSON 404s, the OpenAPI security
 from __future__ import annotations
 
 import json
+import threading
 
 import httpx
 import pytest
@@ -251,3 +252,105 @@ def test_cursor_pages_do_not_shift_when_jobs_arrive(start_server, sqlite_url):
     last = s.client.get("/api/jobs", params={"limit": 2, "before_id": second["next_before_id"]}).json()
     assert [j["id"] for j in last["items"]] == [ids[0]] and last["next_before_id"] is None
     assert s.client.get("/api/jobs", params={"before_id": 0}).status_code == 422
+
+
+@pytest.mark.parametrize("path", ["/api/jobs", "/api/studies"])
+def test_queue_cap_holds_under_parallel_submissions(start_server, any_db_url, path):
+    """25 clients submit at once into a queue with room for 3: exactly 3 are queued, the others
+    get 429 (the count and the insert are one step, on SQLite and PostgreSQL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    s = start_server(any_db_url, env={"MODSAT_MAX_ACTIVE_JOBS": "10"})
+    for _ in range(7):
+        assert s.client.post("/api/jobs", json=TINY).status_code == 201
+    body = TINY if path == "/api/jobs" else {"spec": TINY, "seeds": [0], "algorithms": ["td3-codesign"]}
+    barrier = threading.Barrier(25)
+
+    def submit(_: int) -> int:
+        with httpx.Client(base_url=s.base, timeout=60) as c:
+            barrier.wait()
+            return c.post(path, json=body).status_code
+
+    with ThreadPoolExecutor(25) as pool:
+        codes = sorted(pool.map(submit, range(25)))
+    assert codes == [201] * 3 + [429] * 22
+    assert s.client.get("/api/jobs", params={"status": ["queued", "running"]}).json()["total"] == 10
+
+
+# ----------------------------------------------------------------------------- strict reading (issue 38)
+
+
+def test_a_body_that_is_not_utf8_is_refused_naming_the_encoding(api):
+    """JSON bodies are UTF-8 (docs/service.md); a UTF-16 body is not guessed at but refused."""
+    for encoding in ("utf-16", "utf-16-le", "utf-32"):
+        r = _raw(api, "POST", "/api/jobs", json.dumps(TINY).encode(encoding), **{"Content-Type": "application/json"})
+        assert r.status_code == 400 and "UTF-8" in r.json()["detail"], (encoding, r.text)
+    r = _raw(api, "POST", "/api/jobs", json.dumps(TINY).encode("utf-16"), **{"Content-Type": "application/json"})
+    assert "UTF-16" in r.json()["detail"], "a byte order mark says which encoding was sent"
+    r = _raw(api, "POST", "/api/studies", json.dumps({"spec": TINY, "seeds": [0]}).encode("utf-16"),
+             **{"Content-Type": "application/json"})  # fmt: skip
+    assert r.status_code == 400 and "UTF-8" in r.json()["detail"]
+    r = _raw(
+        api, "POST", "/api/jobs", json.dumps(TINY).encode(), **{"Content-Type": "application/json; charset=utf-16"}
+    )
+    assert r.status_code == 415 and "UTF-8" in r.json()["detail"]
+    r = _raw(api, "POST", "/api/jobs", json.dumps(TINY).encode(), **{"Content-Type": "application/json; charset=UTF-8"})
+    assert r.status_code == 201
+    api.client.post(f"/api/jobs/{r.json()['id']}/cancel")
+
+
+def test_error_messages_do_not_echo_a_long_request(api):
+    job = api.client.post("/api/jobs", json=TINY).json()["id"]
+    api.client.post(f"/api/jobs/{job}/cancel")
+    name = "x" * 12_000
+    for path in (f"/api/jobs/{job}/artifacts/{name}", f"/api/presets/{name}", f"/api/{name}"):
+        r = api.client.get(path)
+        assert r.status_code == 404 and len(r.content) < 600, (path[:40], len(r.content))
+        assert "xxxx" in r.json()["detail"], "the start of the name is shown"
+
+
+def test_a_method_a_path_does_not_take_is_405_with_allow(api):
+    for method, path, allowed in (
+        ("PUT", "/api/jobs", {"GET", "POST"}),
+        ("PATCH", "/api/jobs/1", {"GET", "DELETE"}),
+        ("DELETE", "/api/studies", {"GET", "POST"}),
+        ("GET", "/api/jobs/1/cancel", {"POST"}),
+    ):
+        r = api.client.request(method, path)
+        assert r.status_code == 405, (method, path, r.status_code)
+        assert set(r.headers["allow"].replace(" ", "").split(",")) == allowed, (method, path)
+        assert method in r.json()["detail"] and r.headers["content-type"].startswith("application/json")
+    assert api.client.put("/api/nope").status_code == 404, "an unknown path stays 404"
+
+
+@pytest.mark.parametrize("path", ["/api/jobs/{}", "/api/jobs/{}/metrics", "/api/studies/{}"])
+def test_ids_are_integers_written_as_integers(api, path):
+    job = api.client.post("/api/jobs", json=TINY).json()["id"]
+    api.client.post(f"/api/jobs/{job}/cancel")
+    field = "study_id" if "studies" in path else "job_id"
+    for bad in (f"{job}.0", f"{job}e0", f"+{job}", f"0x{job}", f"{job}_0", f"%20{job}"):
+        r = api.client.get(path.format(bad))
+        assert r.status_code == 422 and field in r.json()["messages"][0], (bad, r.text)
+    if "studies" not in path:
+        assert api.client.get(path.format(job)).status_code == 200
+        assert api.client.get(path.format(f"0{job}")).status_code == 200, "leading zeros are still digits"
+    assert api.client.get(path.format(-1)).status_code == 404 and api.client.get(path.format(2**70)).status_code == 404
+
+
+def test_openapi_lists_every_status_an_operation_answers(api):
+    """A client generated from the schema knows each answer: the middleware's (400 Host, 403
+    Origin, 413 body size, 503 database) and the routes' own (415, 429, ...)."""
+    paths = api.client.get("/api/openapi.json").json()["paths"]
+
+    def codes(path: str, method: str) -> set[str]:
+        return set(paths[path][method]["responses"])
+
+    every = {"400", "503"}
+    assert {"201", "403", "413", "415", "422", "429"} | every <= codes("/api/jobs", "post")
+    assert {"201", "403", "413", "415", "422", "429"} | every <= codes("/api/studies", "post")
+    assert {"200", "202", "403", "404", "409", "422"} | every <= codes("/api/jobs/{job_id}/cancel", "post")
+    assert {"204", "403", "404", "409", "422"} | every <= codes("/api/jobs/{job_id}", "delete")
+    assert {"200", "304", "404", "422"} | every <= codes("/api/jobs/{job_id}/artifacts/{name}", "get")
+    for path, ops in paths.items():
+        for method, op in ops.items():
+            assert every <= set(op["responses"]), (method, path)

@@ -151,11 +151,37 @@ def test_live_viewer_sessions(tmp_path):
         app.stop()
 
 
-def test_live_viewer_refuses_tabs_of_other_sites(tmp_path):
-    """A tab whose websocket handshake came from a page of another site, or named a host this
-    viewer does not answer to (DNS rebinding), gets no session (no run data). The service's own
-    page, on another port of localhost, does (tests/web drive that one in a real browser)."""
-    from types import SimpleNamespace
+def _handshake(port: int, headers: list[tuple[str, str]], *, upgrade: bool = True) -> str:
+    """The status line the viewer answers to a raw HTTP request (a websocket upgrade or a GET)."""
+    import socket
+
+    lines = ["GET /?run=1 HTTP/1.1", *(f"{k}: {v}" for k, v in headers)]
+    if upgrade:
+        lines += [
+            "Upgrade: websocket",
+            "Connection: Upgrade",
+            "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==",
+            "Sec-WebSocket-Version: 13",
+            "Sec-WebSocket-Protocol: viser-v1.1.1",
+        ]
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+        sock.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+        data = b""
+        while b"\r\n" not in data:
+            chunk = sock.recv(4096)
+            if not chunk:
+                break
+            data += chunk
+    return data.split(b"\r\n", 1)[0].decode()
+
+
+def test_live_viewer_refuses_other_sites_at_the_handshake(tmp_path, caplog):
+    """A websocket from a page of another site, or naming a host this viewer does not answer to
+    (DNS rebinding), is refused before the 101 (no session, no scene message); the page itself is
+    not served to a foreign host either; a repeated Host header is a plain 400, not a traceback.
+    The service's own page, on another port of localhost, is served (tests/web drive that one in a
+    real browser)."""
+    import logging
 
     from web.live import DirRuns, ViewerApp
     from web.origin import host_names, origin_allowed
@@ -166,19 +192,21 @@ def test_live_viewer_refuses_tabs_of_other_sites(tmp_path):
         (d / k).write_bytes(v)
     app = ViewerApp(DirRuns([d]), port=0)
     try:
-
-        def refused(**headers):
-            conn = SimpleNamespace(request=SimpleNamespace(headers=headers, path="/?run=1"))
-            app._connection = lambda client: conn  # viser's handshake request, as _connection reads it
-            return app._refused(SimpleNamespace(client_id=0))
-
         here = f"127.0.0.1:{app.port}"
-        assert refused(Host=here, Origin="http://127.0.0.1:8000") is None, "the service's page"
-        assert refused(Host=here, Origin="http://localhost:8000") is None
-        assert refused(Host=here) is None, "no Origin: not a browser"
-        assert "another site" in refused(Host=here, Origin="http://evil.example")
-        assert "another site" in refused(Host=here, Origin="null")
-        assert "host" in refused(Host="evil.example:8080", Origin="http://evil.example:8080")
+        with caplog.at_level(logging.INFO):
+            assert " 101 " in _handshake(app.port, [("Host", here), ("Origin", "http://127.0.0.1:8000")]), "the page"
+            assert " 101 " in _handshake(app.port, [("Host", here), ("Origin", "http://localhost:8000")])
+            assert " 101 " in _handshake(app.port, [("Host", here)]), "no Origin: not a browser"
+            assert " 200 " in _handshake(app.port, [("Host", here)], upgrade=False), "viser's client"
+            assert " 403 " in _handshake(app.port, [("Host", here), ("Origin", "http://evil.example")])
+            assert " 403 " in _handshake(app.port, [("Host", here), ("Origin", "null")])
+            evil = [("Host", "evil.example:8080"), ("Origin", "http://evil.example:8080")]
+            assert " 400 " in _handshake(app.port, evil), "DNS rebinding: a foreign Host"
+            assert " 400 " in _handshake(app.port, [("Host", "evil.example")], upgrade=False), "the page too"
+            assert " 400 " in _handshake(app.port, [("Host", here), ("Host", here)])
+            assert " 400 " in _handshake(app.port, [("Host", here), ("Origin", "http://a"), ("Origin", "http://b")])
+        assert "refused a websocket: a page of another site ('http://evil.example')" in caplog.text
+        assert not [r for r in caplog.records if r.exc_info or r.levelno >= logging.ERROR], caplog.text
     finally:
         app.stop()
     assert host_names("0.0.0.0", "sat.lab, 10.0.0.5") == {"localhost", "127.0.0.1", "::1", "sat.lab", "10.0.0.5"}

@@ -5,7 +5,7 @@ reference line on the learning curves, the total time and the attempts of a job 
 twice, and a thumbnail of each finished job's satellite in the list.
 
 No training runs here: one `modsat serve` without workers, and the jobs' histories written
-through the job store (worker/store.py, as a worker writes them), with files made through
+through the job store (worker/store/, as a worker writes them), with files made through
 their models in modsat_core/artefacts.py (design.json, evaluation.json, curve.json), as
 modsat_core/evaluation/run_files.py's ``run_files`` makes them. The real pipeline's files are shown in
 test_flow.py."""

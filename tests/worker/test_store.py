@@ -1,4 +1,4 @@
-"""The queue protocol of worker/store.py on a real database (SQLite and PostgreSQL):
+"""The job store (worker/store/) on a real database (SQLite and PostgreSQL):
 atomic claims, leases, the reaper, retries, cancellation, fencing, metrics and artefacts."""
 
 from __future__ import annotations
@@ -281,3 +281,86 @@ def test_failure_text_with_nul_characters_is_stored(store):
 def test_artifact_name_with_nul_is_unknown(store):
     job_id = submit(store)
     assert store.artifact_info(job_id, "a\x00b") is None
+
+
+def test_job_ids_are_never_reused_after_a_delete(store):
+    """A deleted job's id stays dead: a client holding it must not find another job there."""
+    first = submit(store)
+    top = submit(store)
+    assert store.delete_job(top) == "deleted"
+    again = submit(store)
+    assert again > top, f"job {top} was deleted and its id was given to a new job"
+    assert store.delete_job(first) == "deleted" and store.delete_job(again) == "deleted"
+    assert submit(store) > again, "an empty table does not start the ids again"
+
+
+def _old_sqlite_store(path) -> str:
+    """A SQLite job store as versions before AUTOINCREMENT created it (ids could be reused)."""
+    import sqlite3
+
+    from sqlalchemy.dialects import sqlite
+    from sqlalchemy.schema import CreateIndex, CreateTable
+
+    from worker.db import metadata
+
+    con = sqlite3.connect(path)
+    for table in metadata.sorted_tables:
+        con.execute(str(CreateTable(table).compile(dialect=sqlite.dialect())).replace("AUTOINCREMENT", ""))
+        for index in table.indexes:
+            con.execute(str(CreateIndex(index).compile(dialect=sqlite.dialect())))
+    con.commit()
+    con.close()
+    return f"sqlite:///{path}"
+
+
+def test_an_older_sqlite_store_is_migrated_and_keeps_its_jobs(tmp_path):
+    url = _old_sqlite_store(tmp_path / "old.db")
+    old = JobStore(url)
+    ids = [submit(old) for _ in range(3)]
+    c = old.claim("w", lease_s=30)
+    assert c is not None and old.publish_progress(c, {"env_steps": 5, "phase": "training"}) == 1
+    old.dispose()
+
+    store = JobStore(url)
+    try:
+        store.create_schema()
+        store.create_schema()  # once is enough; a second start finds nothing to do
+        assert [j["id"] for j in store.list_jobs()[1]] == ids[::-1], "every job kept its id"
+        assert store.get_job(ids[0])["status"] == "running" and store.metrics_after(ids[0])[0]["seq"] == 1
+        assert store.list_attempts(ids[0])[0]["worker_id"] == "w", "rows of other tables still point at their job"
+        with store._read() as conn:
+            assert conn.exec_driver_sql("PRAGMA foreign_key_check").all() == []
+            assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
+            assert "ix_modsat_jobs_claim" in {r[1] for r in conn.exec_driver_sql("PRAGMA index_list(modsat_jobs)")}
+        assert store.delete_job(ids[2]) == "deleted"
+        assert submit(store) == ids[2] + 1, "after the migration a deleted id is not given again"
+    finally:
+        store.dispose()
+
+
+def test_queue_cap_holds_under_parallel_submissions(store):
+    """Counting the active jobs and queueing one are one step: parallel submissions never
+    take the queue past its cap."""
+    from worker.db import QueueFull
+
+    for _ in range(7):
+        submit(store)
+    outcomes: list[str] = []
+    barrier = threading.Barrier(12)
+
+    def one() -> None:
+        barrier.wait()
+        try:
+            store.submit("{}", name=None, algorithm="ga", total_env_steps=1, max_attempts=1, max_active=10)
+            outcomes.append("queued")
+        except QueueFull as exc:
+            assert exc.active == 10
+            outcomes.append("full")
+
+    threads = [threading.Thread(target=one) for _ in range(12)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(outcomes) == ["full"] * 9 + ["queued"] * 3
+    assert store.active_count() == 10

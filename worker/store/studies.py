@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
-from contextlib import AbstractContextManager
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from sqlalchemy import Connection, func, insert, select
+from sqlalchemy import func, insert, select
 
-from .db import db_now, insert_job, jobs, studies, study_jobs
-
-MAX_ID = 2**63 - 1
+from ..db import db_now, hold_queue, insert_job, jobs, studies, study_jobs
+from .base import StoreBase, valid_id
 
 #: What a study shows of each of its jobs.
 _JOB_COLUMNS = [
@@ -26,12 +23,8 @@ _JOB_COLUMNS = [
 ]
 
 
-class StudyQueries:
-    """Mixed into :class:`worker.store.JobStore` (which provides the transactions)."""
-
-    if TYPE_CHECKING:  # provided by JobStore
-        _write: Callable[[], AbstractContextManager[Connection]]
-        _read: Callable[[], AbstractContextManager[Connection]]
+class StudyQueries(StoreBase):
+    """A study and its jobs are created in one transaction."""
 
     def submit_study(
         self,
@@ -42,10 +35,13 @@ class StudyQueries:
         algorithms: list[str],
         job_specs: list[tuple[str, int, str, int]],
         max_attempts: int,
+        max_active: int | None = None,
     ) -> tuple[int, list[int]]:
         """Create a study and queue its jobs, all or nothing. ``job_specs``: (algorithm, seed,
-        spec JSON, total env steps) per job. Returns (study id, job ids)."""
+        spec JSON, total env steps) per job. Returns (study id, job ids). With ``max_active``,
+        raises :class:`~worker.db.QueueFull` when its jobs do not all fit in the queue."""
         with self._write() as conn:
+            hold_queue(conn, len(job_specs), max_active)
             sid = int(
                 conn.execute(
                     insert(studies)
@@ -68,7 +64,7 @@ class StudyQueries:
 
     def get_study(self, study_id: int) -> dict[str, Any] | None:
         """The study's row with ``jobs``: each job's id, algorithm, seed, status and progress."""
-        if not 1 <= study_id <= MAX_ID:
+        if not valid_id(study_id):
             return None
         with self._read() as conn:
             row = conn.execute(select(studies).where(studies.c.id == study_id)).mappings().first()

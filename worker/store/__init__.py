@@ -1,0 +1,27 @@
+"""The job store: every SQL statement of the service lives in this package, one module per concept.
+
+* :mod:`.base`: the engine, the transactions, creating (and migrating) the tables;
+* :mod:`.jobs`: submitting, reading, cancelling and deleting jobs;
+* :mod:`.queue`: the queue protocol of the workers (claim, lease, fencing, the reaper);
+* :mod:`.artifacts`: the artefacts stored in the database;
+* :mod:`.workers`: the worker processes;
+* :mod:`.studies`: studies and their jobs.
+
+One code path for SQLite and PostgreSQL (the schema and the engine set-up are in
+``worker/db.py``). Times are epoch seconds from the database's clock (``db_now``).
+"""
+
+from __future__ import annotations
+
+from .artifacts import CHECKPOINT_NAME, ArtifactQueries, content_type_for
+from .base import MAX_ID
+from .jobs import JobQueries
+from .queue import Beat, Claim, QueueProtocol
+from .studies import StudyQueries
+from .workers import WorkerQueries
+
+__all__ = ["CHECKPOINT_NAME", "MAX_ID", "Beat", "Claim", "JobStore", "content_type_for"]
+
+
+class JobStore(JobQueries, QueueProtocol, ArtifactQueries, WorkerQueries, StudyQueries):
+    """Jobs, attempts, metrics, artefacts, workers and studies in one SQL database."""
