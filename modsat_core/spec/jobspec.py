@@ -80,8 +80,9 @@ class JobSpec(_Section):
 
 
 def is_diffsim(spec: JobSpec) -> bool:
-    """Whether ``spec`` is trained by the first-order learner (its policy, its memory, its trainer)."""
-    return spec.algorithm == "diffsim-control"
+    """Whether ``spec``'s controllers are the first-order learner's (its policy, its memory, its
+    trainer): `diffsim-control`, and the GA with `ga.inner` `diffsim`."""
+    return spec.algorithm == "diffsim-control" or (spec.algorithm == "ga" and spec.ga.inner == "diffsim")
 
 
 class UnrunnableSpec(ValueError):

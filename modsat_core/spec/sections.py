@@ -224,14 +224,22 @@ class Mission(_Section):
 
 
 class GA(_Section):
-    """Genetic-algorithm baseline (Evolution Gym style), TD3 as the inner loop."""
+    """Genetic-algorithm baseline (Evolution Gym style): each design gets its own controller."""
 
+    inner: Literal["td3", "diffsim"] = Field(
+        "td3",
+        description=(
+            "The learner of each design's controller: `td3` (the paper's: TD3 with the `training` "
+            "section's settings) or `diffsim` (the first-order learner with the `diffsim` section's, "
+            "`diffsim-control`). Its budget is `steps_per_design` env steps."
+        ),
+    )
     population_size: int = Field(12, ge=2, le=1000, description="Designs per generation.")
     survivor_start: float = Field(0.6, ge=0.0, le=1.0, description="Survivor fraction at the start of the budget.")
     survivor_end: float = Field(0.0, ge=0.0, le=1.0, description="Survivor fraction at the end of the budget.")
     mutation_rate: float = Field(0.1, ge=0.0, le=1.0, description="Probability that a cell changes type.")
     steps_per_design: int = Field(
-        50_000, ge=1, le=100_000_000, description="Env steps of the TD3 inner loop for each new design."
+        50_000, ge=1, le=100_000_000, description="Env steps of the inner learner for each new design."
     )
 
 

@@ -1,11 +1,13 @@
-"""The genetic-algorithm baseline: designs evolved, each flown by its own TD3 controller.
+"""The genetic-algorithm baseline: designs evolved, each flown by its own controller (TD3's, or
+the first-order learner's with ``ga.inner`` `diffsim`).
 
 It follows Evolution Gym's GA (Bhatia et al. 2021), the paper's baseline:
 
 * generation 0 is ``population_size`` random valid designs (every cell empty, structure
   or actuator with equal probability; invalid draws are drawn again);
-* each new design gets a fresh TD3 controller trained for ``steps_per_design`` env steps
-  on that fixed design (the last one gets what is left of the budget); its fitness is the
+* each new design gets a fresh controller trained for ``steps_per_design`` env steps on that
+  fixed design by the inner learner (the last one gets what is left of the budget; with
+  `diffsim`, a `diffsim-control` run of that budget); its fitness is the
   mean return of the controller's best learning-curve evaluation;
 * between generations the best ``max(2, ceil(P * f))`` designs survive (capped at P - 1
   so every generation brings something new), where the survivor fraction ``f`` moves
@@ -30,8 +32,9 @@ from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.artefacts import CurvePoint, ProgressRecord
 from modsat_core.evaluation.run_files import run_files
 from modsat_core.grid import is_valid, random_design
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import JobSpec, is_diffsim
 from modsat_core.training.checkpoint import CHECKPOINT_VERSION, RunResult
+from modsat_core.training.diffsim import DiffsimRun
 from modsat_core.training.td3_trainer import TD3Run
 
 MAX_DRAWS = 100_000
@@ -76,6 +79,14 @@ class GARun:
         self.best_actor: dict | None = None
         self.inner_ckpt: dict | None = None
         self.curve: list[dict] = []
+
+    @property
+    def step_unit(self) -> int:
+        """The fewest env steps an inner run takes: one batch of TD3's environments, or one update
+        of the first-order learner."""
+        if is_diffsim(self.spec):
+            return self.spec.diffsim.batch_size * self.spec.diffsim.window_steps
+        return self.spec.training.num_envs
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:
@@ -134,15 +145,22 @@ class GARun:
     def _evaluate_pending(self, on_progress, on_checkpoint, should_stop) -> bool:
         """Train a controller for each pending design in turn; True if stopped."""
         total = self.spec.training.total_env_steps
-        while self.pending and total - self.used >= self.spec.training.num_envs:
+        while self.pending and total - self.used >= self.step_unit:
             grid = self.pending[0]
             budget = min(self.spec.ga.steps_per_design, total - self.used)
             seed = (self.spec.seed * 7919 + len(self.records)) % (2**31)
             # The GA reads the inner run's curve best (`kept[0]`), which `select_top_k` does not
             # change: one snapshot, not k copies in every inner checkpoint.
             one = self.spec.training.model_copy(update={"select_top_k": 1})
-            inner_spec = self.spec.model_copy(update={"seed": seed, "training": one})
-            run = TD3Run(inner_spec, fixed_grid=grid, device=self.device)
+            run: TD3Run | DiffsimRun
+            if is_diffsim(self.spec):  # its own run on this design, the budget its total
+                one = one.model_copy(update={"total_env_steps": budget})
+                design = self.spec.design.model_copy(update={"fixed_design": grid.tolist()})
+                update = {"seed": seed, "training": one, "design": design, "algorithm": "diffsim-control"}
+                run = DiffsimRun(self.spec.model_copy(update=update), device=self.device)
+            else:
+                inner_spec = self.spec.model_copy(update={"seed": seed, "training": one})
+                run = TD3Run(inner_spec, fixed_grid=grid, device=self.device)
             if self.inner_ckpt is not None:
                 run.load_state_dict(self.inner_ckpt)
             offset = self.used
@@ -166,7 +184,12 @@ class GARun:
                 self.inner_ckpt = inner
                 on_checkpoint(self.state_dict())
 
-            if run.run(progress, checkpoint, should_stop, budget=budget):
+            stopped = (
+                run.run(progress, checkpoint, should_stop)
+                if isinstance(run, DiffsimRun)
+                else run.run(progress, checkpoint, should_stop, budget=budget)
+            )
+            if stopped:
                 return True
             self.inner_ckpt = None
             assert run.kept  # a finished run has evaluated at least once
@@ -215,7 +238,7 @@ class GARun:
         while True:
             if self._evaluate_pending(on_progress, wrap, should_stop):
                 return RunResult(stopped=True, env_steps=self.used, curve=self.curve)
-            if total - self.used < self.spec.training.num_envs:  # not one more batch of steps
+            if total - self.used < self.step_unit:  # not one more batch of steps
                 break
             self._next_generation()
         on_progress(

@@ -7,7 +7,10 @@ import math
 
 import numpy as np
 
+from modsat_core.agent.diffsim_policy import DiffsimPolicy
+from modsat_core.agent.policy_file import load_policy
 from modsat_core.grid import is_valid
+from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
 from modsat_core.training.ga import mutate, survivor_count
 from modsat_core.training.train import train
 
@@ -63,3 +66,33 @@ def test_mutation_rate():
     m = mutate(rng, g, 0.1)
     changed = (m != g).mean()
     assert 0.08 < changed < 0.12 and set(np.unique(m)) <= {0, 1, 2}
+
+
+def test_ga_with_the_first_order_learner_inside():
+    """`ga.inner` diffsim: each design gets its own diffsim-control run of `steps_per_design`
+    env steps (whole updates of batch x window), the best design's controller is the run's
+    policy, and a stopped GA resumes to the same result."""
+    spec = tiny_spec(
+        algorithm="ga",
+        training__total_env_steps=7 * 32,
+        training__eval_every_steps=10**6,
+        ga={"population_size": 3, "steps_per_design": 64, "inner": "diffsim"},
+        diffsim={"batch_size": 8, "window_steps": 4, "episode_steps": 12, "substeps": 2, "hidden_sizes": [8]},
+    )
+    result = train(spec)
+    files = result.artifacts()
+    designs = json.loads(files["curve.json"])["designs"]
+    # 64 steps = 2 updates of 32 per design; the last design gets the 32 left
+    assert [d["env_steps"] for d in designs] == [64, 64, 64, 32]
+    assert result.env_steps == 7 * 32 and all(is_valid(np.asarray(d["grid"])) for d in designs)
+    best = max(designs, key=lambda d: d["fitness"])
+    assert json.loads(files["design.json"])["grid"] == best["grid"]
+    policy, grid, _ = load_policy(files["policy.pt"])
+    assert isinstance(policy, DiffsimPolicy) and grid.tolist() == best["grid"]
+    ckpts: list[dict] = []
+    stops = iter([False, False, True])
+    first = train(spec, on_checkpoint=ckpts.append, should_stop=lambda: next(stops, False))
+    assert first.stopped
+    resumed = train(spec, checkpoint=checkpoint_from_bytes(checkpoint_to_bytes(ckpts[-1])))
+    assert resumed.artifacts()["curve.json"] == files["curve.json"]
+    assert resumed.artifacts()["evaluation.json"] == files["evaluation.json"]
