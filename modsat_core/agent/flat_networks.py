@@ -47,10 +47,10 @@ class MLPActor(nn.Module):
 
 
 class MLPCritic(nn.Module):
-    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int], layer_norm: bool = False):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
         super().__init__()
-        self.q1 = mlp([obs_dim + act_dim, *hidden, 1], layer_norm)
-        self.q2 = mlp([obs_dim + act_dim, *hidden, 1], layer_norm)
+        self.q1 = mlp([obs_dim + act_dim, *hidden, 1])
+        self.q2 = mlp([obs_dim + act_dim, *hidden, 1])
 
     def forward(self, obs: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
         xa = torch.cat((obs, action), dim=-1)

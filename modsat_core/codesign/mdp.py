@@ -23,14 +23,14 @@ from torch import Tensor
 
 from modsat_core.codesign.features import CellObs, PhysState, cell_observation
 from modsat_core.grid import ACTUATOR
-from modsat_core.sim.mission import draw_episode, error_quaternion, relabel, return_bounds
+from modsat_core.sim.mission import draw_episode, return_bounds
 from modsat_core.sim.morphology import (
     mass_properties_batched,
     seed_component_batched,
     valid_mask_batched,
 )
 from modsat_core.sim.slew import SlewSim
-from modsat_core.spec.jobspec import JobSpec, Mission
+from modsat_core.spec.jobspec import JobSpec
 
 
 def effective_invalid_penalty(spec: JobSpec) -> float:
@@ -72,20 +72,6 @@ def observe_compact(c: Compact, N: int, design_steps: int, rate_limit_rad_s: flo
     phys = PhysState(q_BN=c.q_BN.float(), q_TN=c.q_TN.float(), omega_B=c.omega_B.float(), h_cells=c.h_cells.float())
     return cell_observation(
         c.grid.long().reshape(B, N, N, N), c.design_step.long(), design_steps, phys, rate_limit_rad_s
-    )
-
-
-def relabel_rows(b: dict[str, Tensor], design_steps: int, mission: Mission, cone_deg: float) -> Tensor:
-    """A replayed batch's rewards with the hold terms paid inside ``cone_deg`` (a tolerance
-    curriculum): flight rows recomputed from their states; design steps and episode ends kept."""
-    return relabel(
-        b["reward"],
-        error_quaternion(b["obs_q_TN"].float(), b["obs_q_BN"].float()),
-        error_quaternion(b["next_q_TN"].float(), b["next_q_BN"].float()),
-        b["next_omega_B"].float(),
-        b["terminal"] | (b["obs_design_step"] < design_steps),
-        mission,
-        cone_deg,
     )
 
 

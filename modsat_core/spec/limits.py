@@ -45,10 +45,10 @@ def transition_bytes(N: int) -> int:
 
     Per state: the grid (uint8 per cell), the design step (int16), q_BN, q_TN (4 float32 each),
     omega (3 float32), the wheel momenta (3 float16 per cell); the action is 3 float16 per cell;
-    reward (float32), terminal and done (bool)."""
+    reward (float32) and terminal (bool)."""
     C = N**3
     state = C + 2 + 16 + 16 + 12 + 6 * C
-    return 2 * state + 6 * C + 4 + 1 + 1
+    return 2 * state + 6 * C + 4 + 1
 
 
 def replay_capacity(spec: JobSpec) -> int:

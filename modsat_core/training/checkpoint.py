@@ -94,8 +94,7 @@ def _plain(x):
 
 
 def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
-    """The compact transition layout: two compact states, the action, reward, terminal, and
-    ``done`` (the episode ended there, also by its time limit: where n-step returns stop)."""
+    """The compact transition layout: two compact states, the action, reward and terminal."""
     C = N**3
     state = {
         "grid": ((C,), torch.uint8),
@@ -112,7 +111,6 @@ def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
             "action": ((C, 3), torch.float16),
             "reward": ((), torch.float32),
             "terminal": ((), torch.bool),
-            "done": ((), torch.bool),
         }
     )
     return fields

@@ -29,7 +29,7 @@ from modsat_core.agent.td3 import TD3, ReplayBuffer, TD3Config
 from modsat_core.codesign.features import control_globals
 from modsat_core.evaluation.monte_carlo import monte_carlo
 from modsat_core.sim.gym_envs import reference_design
-from modsat_core.sim.mission import draw_episode, relabel
+from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.jobspec import JobSpec
@@ -53,12 +53,6 @@ def flat_state(sim: SlewSim) -> Tensor:
     h = (sim.state.h_B / sim.h_scale_Nms).reshape(sim.B, -1)
     glob = control_globals(sim.error_quaternion(), sim.state.omega_B, sim.mission.rate_limit_rad_s)
     return torch.cat((glob, h), dim=-1).float()
-
-
-def flat_attitude(o: Tensor, rate_limit_rad_s: float) -> tuple[Tensor, Tensor]:
-    """The error quaternion and body rate a flat state holds (`control_globals` puts q_BT in its
-    first 4 numbers and omega / rate limit in its 9th to 11th)."""
-    return o[:, :4], o[:, 8:11] * rate_limit_rad_s
 
 
 class _Controller:
@@ -95,7 +89,7 @@ def bench_control(
     sim = SlewSim.from_designs([design] * B, m, spec.modules, dtype=torch.float32)
     sim.reset(list(range(B)), [draw_episode(r, m) for r in rngs])
     obs_dim, act_dim = flat_state(sim).shape[1], 3 * K
-    critic = MLPCritic(obs_dim, act_dim, hidden, t.critic_layer_norm)
+    critic = MLPCritic(obs_dim, act_dim, hidden)
     actor = MLPActor(obs_dim, act_dim, hidden, mirror_at=0 if t.odd_control else None)
     agent = TD3(actor, critic, TD3Config.from_training(t))
     buf = ReplayBuffer(
@@ -110,7 +104,6 @@ def bench_control(
     )
     curve: list[dict] = []
     steps, credit, next_eval, t0 = 0, 0.0, eval_every, time.monotonic()
-    noise_u = torch.rand(B, generator=gen) if t.exploration_noise_min is not None else torch.zeros(B)
 
     def fly(actor: torch.nn.Module) -> dict:
         mc = monte_carlo(
@@ -160,25 +153,18 @@ def bench_control(
         else:
             with torch.no_grad():
                 a = agent.actor(o)
-            std = t.noise_stds(steps, noise_u).unsqueeze(-1)
-            a = (a + torch.randn(a.shape, generator=gen) * std).clamp(-1.0, 1.0)
+            a = (a + torch.randn(a.shape, generator=gen) * t.noise_at(steps)).clamp(-1.0, 1.0)
         out = sim.step(a.reshape(B, K, 3))
         buf.add({"o": o, "a": a, "r": out.reward.float(), "o2": flat_state(sim), "d": out.terminated})
         ended = (out.terminated | out.truncated).nonzero().flatten().tolist()
         if ended:
             sim.reset(ended, [draw_episode(rngs[i], m) for i in ended])
-            if t.exploration_noise_min is not None:
-                noise_u[ended] = torch.rand(len(ended), generator=gen)
         steps += B
         if steps >= t.learning_starts and buf.size >= t.batch_size:
             credit += B / t.train_frequency
             while credit >= 1.0:
                 credit -= 1.0
-                agent.schedule(t, steps)
                 b = buf.sample(t.batch_size, gen)
-                if t.hold_cone_start_deg is not None:
-                    (q, _), (q2, omega2) = (flat_attitude(b[k], m.rate_limit_rad_s) for k in ("o", "o2"))
-                    b["r"] = relabel(b["r"], q, q2, omega2, b["d"], m, t.hold_cone_deg(steps, m.tolerance_deg))
                 agent.update(b["o"], b["a"], b["r"], b["o2"], b["d"], gen)
         if steps >= next_eval:
             evaluate()

@@ -17,7 +17,7 @@ from modsat_core.agent.policy_file import actor_from_state, new_actor
 from modsat_core.agent.td3 import TD3, ReplayBuffer, TD3Config
 from modsat_core.artefacts import ProgressRecord
 from modsat_core.codesign.features import N_FEATURES, CellObs
-from modsat_core.codesign.mdp import CoDesignEnv, Compact, observe_compact, relabel_rows
+from modsat_core.codesign.mdp import CoDesignEnv, Compact, observe_compact
 from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
 from modsat_core.spec.jobspec import JobSpec
@@ -44,7 +44,7 @@ class TD3Run:
         self.env = CoDesignEnv(spec, self.t.num_envs, seed=spec.seed, fixed_grid=self.fixed_grid, device=device)
         torch.manual_seed(spec.seed)
         actor = new_actor(spec).to(device)
-        critic = make_critic(self.t.network, N_FEATURES, list(self.t.hidden_sizes), self.t.critic_layer_norm).to(device)
+        critic = make_critic(self.t.network, N_FEATURES, list(self.t.hidden_sizes)).to(device)
         self.agent = TD3(actor, critic, TD3Config.from_training(self.t))
         capacity = min(self.t.buffer_size, max(self.t.total_env_steps, self.t.batch_size))
         self.buffer = ReplayBuffer(replay_fields(self.env.N), capacity, device=device)
@@ -62,10 +62,6 @@ class TD3Run:
         self.recent: list[dict] = []  # finished training episodes since the last progress call
         self.last_info: dict = {}
         self.explore_design = torch.ones(self.env.B, dtype=torch.bool, device=device)
-        # Each episode's place in [exploration_noise_min, noise], drawn when it starts (only
-        # with `exploration_noise_min`: runs without it keep their random streams).
-        self.noise_u = torch.zeros(self.env.B, device=device)
-        self._draw_noise(torch.ones(self.env.B, dtype=torch.bool, device=device))
 
     # ------------------------------------------------------------------ acting
     def _act(self, obs: CellObs) -> torch.Tensor:
@@ -76,8 +72,7 @@ class TD3Run:
         else:
             with torch.no_grad():
                 a = self.agent.actor(obs)
-        std = self.t.noise_stds(self.env_steps, self.noise_u).reshape(B, 1, 1)
-        noise = torch.randn(a.shape, generator=self.gen, device=self.device) * std
+        noise = torch.randn(a.shape, generator=self.gen, device=self.device) * self.t.noise_at(self.env_steps)
         explore = self._explored_designs(obs)
         # Designing rows of an episode whose design is not explored grow the policy's own design.
         a = a + noise * (~obs.design | explore).reshape(B, 1, 1)
@@ -96,11 +91,6 @@ class TD3Run:
             rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
             a = torch.where(obs.design.reshape(B, 1, 1), a, rand)
         return finish(obs, a)
-
-    def _draw_noise(self, starting: torch.Tensor) -> None:
-        if self.t.exploration_noise_min is not None and bool(starting.any()):
-            draw = torch.rand(self.env.B, generator=self.gen, device=self.device)
-            self.noise_u = torch.where(starting, draw, self.noise_u)
 
     def _explored_designs(self, obs: CellObs) -> torch.Tensor:
         """(B,) bool: the episodes whose design phase is explored (`design_exploration_episodes`).
@@ -157,11 +147,9 @@ class TD3Run:
                     "action": action,
                     "reward": st.reward,
                     "terminal": st.terminal,
-                    "done": st.done,
                 }
             )
             self.recent.extend(st.finished)
-            self._draw_noise(st.done)
             self.env_steps += B
             if self.env_steps >= self.t.learning_starts and self.buffer.size >= self.t.batch_size:
                 self.update_credit += B / self.t.train_frequency
@@ -184,17 +172,8 @@ class TD3Run:
         return False
 
     def _update(self) -> None:
-        discount = None
-        if self.t.n_step > 1:
-            b, discount = self.buffer.sample_n_step(
-                self.t.batch_size, self.t.n_step, self.env.B, self.t.gamma, self.gen
-            )
-        else:
-            b = self.buffer.sample(self.t.batch_size, self.gen)
+        b = self.buffer.sample(self.t.batch_size, self.gen)
         N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
-        if self.t.hold_cone_start_deg is not None:
-            m = self.spec.mission
-            b["reward"] = relabel_rows(b, D, m, self.t.hold_cone_deg(self.env_steps, m.tolerance_deg))
         # One feature pass over both halves of the transitions (half the small ops of two).
         pair = {k: torch.cat((b["obs_" + k], b["next_" + k])) for k in Compact.FIELDS}
         both = observe_compact(Compact.from_dict(pair), N, D, rl)
@@ -204,8 +183,7 @@ class TD3Run:
         # While the design layers are held the controller learns to fly the design the policy
         # starts from (and the explored ones near it) before the design moves.
         actor_rows = None if self.design_released() else ~obs.design
-        self.agent.schedule(self.t, self.env_steps)
-        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount, actor_rows)
+        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, actor_rows)
 
     @property
     def updates(self) -> int:
@@ -275,7 +253,6 @@ class TD3Run:
             "cpu_gen": self.cpu_gen.get_state(),
             "rng": self.rng.bit_generator.state,
             "explore_design": self.explore_design.cpu().clone(),
-            "noise_u": self.noise_u.cpu().clone(),
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -295,6 +272,6 @@ class TD3Run:
         self.gen.set_state(d["gen"])
         self.cpu_gen.set_state(d["cpu_gen"])
         self.rng.bit_generator.state = d["rng"]
+        # Checkpoints of the removed `exploration_noise_min` hold each episode's noise draw,
+        # "noise_u": not read (a run that set the key does not load, docs/lab/2026-12-05-unused-knobs-removed.md).
         self.explore_design.copy_(d["explore_design"])
-        if "noise_u" in d:  # checkpoints from before `exploration_noise_min` have none
-            self.noise_u.copy_(d["noise_u"])

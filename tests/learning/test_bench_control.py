@@ -11,8 +11,10 @@ from modsat_core.codesign.features import N_COMMON, N_DESIGN, PhysState, cell_ob
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.training.td3_control import flat_attitude, flat_state
+from modsat_core.training.td3_control import bench_control, flat_state
 from server.cli import main
+
+from .conftest import tiny_spec
 
 
 def test_flat_state_is_what_an_actuator_cell_sees(tiny):
@@ -33,10 +35,17 @@ def test_flat_state_is_what_an_actuator_cell_sees(tiny):
         torch.as_tensor(grid).long().expand(3, 2, 2, 2), torch.full((3,), 3), 3, phys, spec.mission.rate_limit_rad_s
     )
     torch.testing.assert_close(flat_state(sim), obs.x[:, cell, N_COMMON + N_DESIGN :])
-    # and the attitude the tolerance curriculum recomputes rewards from is read back from it
-    q, omega = flat_attitude(flat_state(sim), spec.mission.rate_limit_rad_s)
-    torch.testing.assert_close(q, sim.error_quaternion().float())
-    torch.testing.assert_close(omega, sim.state.omega_B.float())
+
+
+def test_bench_control_can_fly_the_target_actor():
+    report = bench_control(tiny_spec(training__total_env_steps=400), eval_every=200, eval_target=True)
+    assert [p["env_steps"] for p in report["curve"]] == [200, 400]
+    for p in report["curve"]:
+        assert set(p["target"]) <= set(p) and 0.0 <= p["target"]["success_rate"] <= 1.0
+    # the target actor is a different network from the actor (a Polyak average), so its flights differ
+    assert any(p["target"]["mean_return"] != p["mean_return"] for p in report["curve"])
+    plain = bench_control(tiny_spec(training__total_env_steps=400), eval_every=200)
+    assert "target" not in plain["curve"][0]
 
 
 def test_cli_bench_control_trains_evaluates_and_compares_with_pd(tiny, tmp_path, capsys):
