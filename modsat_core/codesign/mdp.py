@@ -22,12 +22,11 @@ import torch
 from torch import Tensor
 
 from modsat_core.codesign.features import CellObs, PhysState, cell_observation
-from modsat_core.grid import ACTUATOR
+from modsat_core.grid import ACTUATOR, valid_mask
 from modsat_core.sim.mission import draw_episode, return_bounds
 from modsat_core.sim.morphology import (
     mass_properties_batched,
     seed_component_batched,
-    valid_mask_batched,
 )
 from modsat_core.sim.slew import SlewSim
 from modsat_core.spec.jobspec import JobSpec
@@ -173,7 +172,7 @@ class CoDesignEnv:
             if len(last):
                 if self.spec.design.repair:
                     self.grids[last] = seed_component_batched(self.grids[last])
-                valid = valid_mask_batched(self.grids[last])
+                valid = valid_mask(self.grids[last])
                 bad, good = last[~valid], last[valid]
                 reward[bad] = self.penalty
                 terminal[bad] = True
