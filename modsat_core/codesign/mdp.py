@@ -30,6 +30,7 @@ from modsat_core.sim.morphology import (
 )
 from modsat_core.sim.slew import SlewSim
 from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.limits import REPLAY_STATE
 
 
 def effective_invalid_penalty(spec: JobSpec) -> float:
@@ -55,7 +56,8 @@ class Compact:
     omega_B: Tensor  # (B, 3) float32
     h_cells: Tensor  # (B, C, 3) float16, wheel momentum / scale
 
-    FIELDS = ("grid", "design_step", "q_BN", "q_TN", "omega_B", "h_cells")
+    #: The replay's state fields, in its order (spec.limits.REPLAY_STATE: the layout's one table).
+    FIELDS = tuple(name for name, _, _ in REPLAY_STATE)
 
     def as_dict(self, prefix: str = "") -> dict[str, Tensor]:
         return {prefix + k: getattr(self, k) for k in self.FIELDS}
