@@ -4,16 +4,54 @@ A design is an integer grid ``(N, N, N)``: 0 empty, 1 structure, 2 actuator (a 3
 reaction-wheel unit). It is *valid* when its modules are face-connected (6-neighbourhood)
 and it has at least one actuator. numpy only, so that validating a spec (the API process,
 ``modsat check``) and the viewer never import torch.
+
+The rule is written once, in :func:`flood_fill` and :func:`valid_mask`, with the operators numpy
+arrays and torch tensors share: the learning code runs the same functions on batches of tensors
+(the co-design MDP, the features, the design repair of :mod:`modsat_core.sim.morphology`).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
 #: Cell types of a design grid.
 EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
 
-_NEIGHBOURS = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
+
+def flood_fill(reached: Any, filled: Any) -> Any:
+    """Grow ``reached`` (B, N, N, N) bool by 6-neighbour dilation inside ``filled`` until it
+    stops. numpy arrays or torch tensors: only the operators both have are used."""
+    while True:
+        grown = reached & filled  # a new array (reached lies inside filled)
+        grown[:, 1:] |= reached[:, :-1]
+        grown[:, :-1] |= reached[:, 1:]
+        grown[:, :, 1:] |= reached[:, :, :-1]
+        grown[:, :, :-1] |= reached[:, :, 1:]
+        grown[:, :, :, 1:] |= reached[:, :, :, :-1]
+        grown[:, :, :, :-1] |= reached[:, :, :, 1:]
+        grown &= filled
+        if bool((grown == reached).all()):
+            return reached
+        reached = grown
+
+
+def _connected(filled: Any) -> Any:
+    """(B, N, N, N) bool -> (B,) bool: the flood fill from each design's first module (in
+    row-major order) reaches all of them (true for an empty design)."""
+    flat = filled.reshape(filled.shape[0], -1)
+    first = flat & (flat.cumsum(1) == 1)
+    return (flood_fill(first.reshape(filled.shape), filled) == filled).reshape(flat.shape).all(1)
+
+
+def valid_mask(grids: Any) -> Any:
+    """Validity of B designs at once: (B, N, N, N) integer -> (B,) bool, numpy or torch: some
+    modules, all face-connected, one of them an actuator. At most N^3 dilations, usually about N."""
+    B = grids.shape[0]
+    filled = grids > 0
+    has_act = (grids == ACTUATOR).reshape(B, -1).any(1)
+    return filled.reshape(B, -1).any(1) & _connected(filled) & has_act
 
 
 def describe(modules: int, actuators: int) -> str:
@@ -33,25 +71,8 @@ def as_grid(design) -> np.ndarray:
 
 def is_connected(design) -> bool:
     """All modules form one face-connected (6-neighbour) component; an empty grid is not."""
-    grid = as_grid(design)
-    filled = grid > 0
-    cells = np.argwhere(filled)
-    if len(cells) == 0:
-        return False
-    seen = np.zeros_like(filled)
-    stack = [tuple(cells[0])]
-    seen[stack[0]] = True
-    n = grid.shape[0]
-    count = 0
-    while stack:
-        c = stack.pop()
-        count += 1
-        for d in _NEIGHBOURS:
-            nb = (c[0] + d[0], c[1] + d[1], c[2] + d[2])
-            if all(0 <= x < n for x in nb) and filled[nb] and not seen[nb]:
-                seen[nb] = True
-                stack.append(nb)
-    return count == len(cells)
+    filled = as_grid(design)[None] > 0
+    return bool(filled.any()) and bool(_connected(filled)[0])
 
 
 def has_actuator(design) -> bool:

@@ -417,10 +417,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     from modsat_core.agent.policy_file import load_policy
     from modsat_core.evaluation.run_files import final_evaluation
+    from modsat_core.evaluation.run_folder import RunFolder
 
-    path = os.path.join(args.run_dir, "policy.pt")
-    with open(path, "rb") as fh:
-        actor, grid, spec = load_policy(fh.read())
+    actor, grid, spec = load_policy(RunFolder(args.run_dir).read("policy.pt"))
     if grid is None:
         print("modsat: this policy has no design", file=sys.stderr)
         return 2
@@ -647,6 +646,7 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "episodes", None) is not None and not 1 <= args.episodes <= 10_000:
         print("modsat: --episodes must be between 1 and 10,000", file=sys.stderr)
         return 2
+    from modsat_core.artefacts import ArtefactError
     from modsat_core.spec.jobspec import SpecError
 
     try:
@@ -657,7 +657,7 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 141
-    except SpecError as exc:
+    except (SpecError, ArtefactError) as exc:  # a bad spec; a run folder's file missing or not in its format
         print(f"modsat: {exc}", file=sys.stderr)
         return 2
     except (KeyError, OSError) as exc:  # an unknown preset; a file or directory that cannot be used

@@ -207,15 +207,15 @@ def _cmd_view(args: argparse.Namespace) -> int:
         print(f"modsat view: {exc}", file=sys.stderr)
         return 2
     if args.save:
+        from modsat_core.evaluation.run_folder import RunFolder
         from web.recording import recording_bytes, recording_html
 
-        run_dir = Path(args.run_dirs[0])
-        spec = run_dir / "spec.json"
+        run = RunFolder(args.run_dirs[0])  # DirRuns has read it: design and trajectories are there
         data = recording_bytes(
-            (run_dir / "design.json").read_bytes(),
-            (run_dir / "trajectories.json").read_bytes(),
-            spec_json=spec.read_bytes() if spec.is_file() else None,
-            title=run_dir.name,
+            run.read("design.json"),
+            run.read("trajectories.json"),
+            spec_json=run.read_optional("spec.json"),
+            title=run.name,
         )
         out = Path(args.save)
         if out.suffix.lower() == ".html":

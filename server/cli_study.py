@@ -46,10 +46,11 @@ def add_commands(sub, load_spec, check_limits) -> None:
 
 def _write_report(run_dirs: list[str], out: str) -> int:
     from modsat_core.artefacts import ArtefactError
-    from modsat_core.evaluation.study_report import load_run, report_files
+    from modsat_core.evaluation.run_folder import RunFolder
+    from modsat_core.evaluation.study_report import report_files, saved_run
 
     try:
-        runs = [load_run(d) for d in dict.fromkeys(os.path.normpath(d) for d in run_dirs)]
+        runs = [saved_run(RunFolder(d)) for d in dict.fromkeys(os.path.normpath(d) for d in run_dirs)]
         files, _ = report_files(runs)
     except ArtefactError as exc:
         print(f"modsat: {exc}", file=sys.stderr)

@@ -14,7 +14,8 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from modsat_core.artefacts import ArtefactError, CurveFile, CurvePoint
-from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, run_from_files, study, table_markdown
+from modsat_core.evaluation.run_folder import RunFolder
+from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, saved_run, study, table_markdown
 from modsat_core.spec.jobspec import JobSpec, SpecError
 from modsat_core.spec.limits import check as check_limits
 from modsat_core.spec.study import (
@@ -209,7 +210,7 @@ def _run_of(store, study_spec: JobSpec, job: dict[str, Any]) -> SavedRun:
         files = {n: store.read_artifact(job["id"], n) for n in FILES}
         if all(files.values()):
             try:
-                return run_from_files(ref, files)
+                return saved_run(RunFolder(ref, files))
             except ArtefactError:
                 pass  # shown by its curve below; the job page has its files
     points = []

@@ -20,6 +20,7 @@ from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 
 import web
+from modsat_core.evaluation.run_folder import RunFolder
 from web.run import RunData, learner_label
 
 from .settings import ServerSettings
@@ -60,13 +61,8 @@ class StoreRuns:
         files = {n: self.store.read_artifact(job_id, n) for n in (*NEEDED, "evaluation.json", "spec.json")}
         if any(files[n] is None for n in NEEDED):
             raise KeyError(key)
-        return RunData.from_json(
-            files["design.json"],
-            files["trajectories.json"],
-            evaluation=files["evaluation.json"],
-            spec=files["spec.json"],
-            title=f"job {job_id} {row['name'] or ''}".strip(),
-        )
+        run = RunFolder(f"/api/jobs/{job_id}", files)
+        return RunData.from_folder(run, title=f"job {job_id} {row['name'] or ''}".strip())
 
     def defaults(self, choices: list[tuple[str, str]]) -> tuple[str | None, str | None]:
         return (choices[0][0] if choices else None, None)

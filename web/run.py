@@ -6,7 +6,8 @@ evaluation slews (modsat_core.evaluation.monte_carlo.monte_carlo): ``t_s`` (T,),
 first, ``omega_B`` (T, 3) rad/s, ``h_B`` (T, 3) wheel momentum in N m s, ``error_deg`` (T,),
 ``q_TN`` (4,) and the episode's ``metrics``. Both controllers fly the same seeded slews, and
 so do two runs with the same evaluation seed: episode i is comparable across them. The files
-are read through their models in modsat_core.artefacts (a file that does not fit raises
+are read through their models in modsat_core.artefacts, a run folder through
+modsat_core.evaluation.run_folder (a file that is missing or does not fit raises
 ``ArtefactError``, a ``ValueError``, naming it).
 """
 
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from modsat_core.artefacts import DesignReport, EpisodeMetrics, EvaluationReport, Trajectories, Trajectory
+from modsat_core.evaluation.run_folder import RunFolder
 from modsat_core.grid import ACTUATOR, EMPTY
 
 #: Controllers in ``trajectories.json`` and how the viewer names them.
@@ -124,36 +126,50 @@ class RunData:
     spec: dict | None = None
 
     @classmethod
-    def from_json(cls, design, trajectories, *, evaluation=None, spec=None, title: str | None = None) -> RunData:
-        """From the artefacts' bytes (or already decoded JSON); ``ArtefactError`` if one is not in its format."""
-        d = DesignReport.parse(design)
-        traj = Trajectories.parse(trajectories)
-        ev = None if evaluation is None else EvaluationReport.parse(evaluation)
-        spec = json.loads(spec) if isinstance(spec, (bytes, str)) else spec
-        episodes = {k: [Episode.from_record(e) for e in getattr(traj, k)] for k in CONTROLLERS}
+    def of(
+        cls,
+        design: DesignReport,
+        trajectories: Trajectories,
+        *,
+        evaluation: EvaluationReport | None = None,
+        spec: dict | None = None,
+        title: str | None = None,
+    ) -> RunData:
+        """From the artefacts' records."""
+        episodes = {k: [Episode.from_record(e) for e in getattr(trajectories, k)] for k in CONTROLLERS}
         if title is None:
             title = (spec or {}).get("name") or (spec or {}).get("algorithm") or "run"
-        return cls(title=title, grid=d.array, episodes=episodes, design=d, evaluation=ev, spec=spec)
+        return cls(title=title, grid=design.array, episodes=episodes, design=design, evaluation=evaluation, spec=spec)
+
+    @classmethod
+    def from_json(cls, design, trajectories, *, evaluation=None, spec=None, title: str | None = None) -> RunData:
+        """From the artefacts' bytes (or already decoded JSON); ``ArtefactError`` if one is not in its format."""
+        return cls.of(
+            DesignReport.parse(design),
+            Trajectories.parse(trajectories),
+            evaluation=None if evaluation is None else EvaluationReport.parse(evaluation),
+            spec=json.loads(spec) if isinstance(spec, (bytes, str)) else spec,
+            title=title,
+        )
+
+    @classmethod
+    def from_folder(cls, run: RunFolder, title: str | None = None) -> RunData:
+        """From a run's folder (a directory, or a job's artefacts): ``design.json`` and
+        ``trajectories.json`` needed, ``evaluation.json`` and ``spec.json`` where the run has them
+        (the spec not validated: a run whose spec this version refuses is still shown)."""
+        return cls.of(
+            run.design(),
+            run.trajectories(),
+            evaluation=run.evaluation() if run.has("evaluation.json") else None,
+            spec=run.spec_data(),
+            title=title,
+        )
 
     @classmethod
     def from_dir(cls, path: str | Path, title: str | None = None) -> RunData:
-        """From a directory written by ``modsat train --out DIR``."""
-        p = Path(path)
-        for needed in ("design.json", "trajectories.json"):
-            if not (p / needed).is_file():
-                raise FileNotFoundError(f"{p / needed} is missing: is {p} a directory written by `modsat train`?")
-
-        def opt(name: str) -> bytes | None:
-            f = p / name
-            return f.read_bytes() if f.is_file() else None
-
-        return cls.from_json(
-            (p / "design.json").read_bytes(),
-            (p / "trajectories.json").read_bytes(),
-            evaluation=opt("evaluation.json"),
-            spec=opt("spec.json"),
-            title=title or p.name,
-        )
+        """From a directory written by ``modsat train --out DIR`` (titled by its name)."""
+        run = RunFolder(path)
+        return cls.from_folder(run, title or run.name)
 
     @property
     def algorithm(self) -> str:

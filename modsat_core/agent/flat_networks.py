@@ -1,14 +1,17 @@
-"""Plain MLP actor / critic pairs for flat observations: gymnasium tasks (td3_gym) and the
-flat controller of ``bench control``. They follow the protocol of :class:`modsat_core.agent.td3.TD3`.
+"""Plain MLP actor / critic pairs for flat observations (gymnasium tasks, td3_gym), and the flat
+controller of ``bench control``: the same MLPs on one fixed design's per-cell observations, so
+that the co-design trainer trains it. All follow the protocol of :class:`modsat_core.agent.td3.TD3`.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
-from modsat_core.agent.layers import mlp
-from modsat_core.codesign.features import mirror_control
+from modsat_core.agent.layers import effort, finish, imitation, mlp
+from modsat_core.codesign.features import CONTROL_AT, N_CONTROL_GLOBAL, CellObs, mirror_control
+from modsat_core.grid import ACTUATOR
 
 
 class MLPActor(nn.Module):
@@ -47,11 +50,69 @@ class MLPActor(nn.Module):
 
 
 class MLPCritic(nn.Module):
-    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int], layer_norm: bool = False):
+    def __init__(self, obs_dim: int, act_dim: int, hidden: list[int]):
         super().__init__()
-        self.q1 = mlp([obs_dim + act_dim, *hidden, 1], layer_norm)
-        self.q2 = mlp([obs_dim + act_dim, *hidden, 1], layer_norm)
+        self.q1 = mlp([obs_dim + act_dim, *hidden, 1])
+        self.q2 = mlp([obs_dim + act_dim, *hidden, 1])
 
     def forward(self, obs: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
         xa = torch.cat((obs, action), dim=-1)
         return self.q1(xa).squeeze(-1), self.q2(xa).squeeze(-1)
+
+
+def flat_observation(obs: CellObs, act_cells: Tensor) -> Tensor:
+    """(B, 20 + 3K) the satellite's flat state in a fixed design's per-cell observations: the
+    control globals (the same on every cell; read on the first actuator) and each actuator
+    cell's wheel momentum, in cell order (the simulator's wheel-unit order)."""
+    g0, g1 = CONTROL_AT, CONTROL_AT + N_CONTROL_GLOBAL
+    glob = obs.x[:, act_cells[0], g0:g1]
+    h = obs.x[:, act_cells, g1 : g1 + 3].reshape(obs.x.shape[0], -1)
+    return torch.cat((glob, h), dim=-1)
+
+
+def _actuator_cells(grid: np.ndarray) -> Tensor:
+    cells = np.flatnonzero(np.asarray(grid).reshape(-1) == ACTUATOR)
+    if len(cells) == 0:
+        raise ValueError("the flat controller needs a design with at least one actuator")
+    return torch.as_tensor(cells)
+
+
+class FlatCellActor(nn.Module):
+    """The flat controller of one fixed design as a co-design actor: :class:`MLPActor` on
+    :func:`flat_observation`, its 3K torques put on the actuator cells (zero elsewhere), so the
+    trainer, TD3 and the Monte-Carlo's policy controller fly it as they fly the per-cell actors.
+    No design head: the design is fixed (``odd_control``: see :class:`MLPActor`)."""
+
+    act_cells: Tensor
+
+    def __init__(self, grid: np.ndarray, hidden: list[int], odd_control: bool = False):
+        super().__init__()
+        self.register_buffer("act_cells", _actuator_cells(grid))
+        k = len(self.act_cells)
+        self.mlp = MLPActor(N_CONTROL_GLOBAL + 3 * k, 3 * k, hidden, mirror_at=0 if odd_control else None)
+
+    def forward(self, obs: CellObs) -> Tensor:
+        B, C = obs.x.shape[:2]
+        a = self.mlp(flat_observation(obs, self.act_cells)).reshape(B, -1, 3)
+        return a.new_zeros(B, C, 3).index_copy(1, self.act_cells, a)
+
+    finish = staticmethod(finish)
+    effort = staticmethod(effort)
+    imitation = staticmethod(imitation)
+
+
+class FlatCellCritic(nn.Module):
+    """The twin critics that go with :class:`FlatCellActor`: :class:`MLPCritic` on the flat
+    state and the actuator cells' torques."""
+
+    act_cells: Tensor
+
+    def __init__(self, grid: np.ndarray, hidden: list[int]):
+        super().__init__()
+        self.register_buffer("act_cells", _actuator_cells(grid))
+        k = len(self.act_cells)
+        self.mlp = MLPCritic(N_CONTROL_GLOBAL + 3 * k, 3 * k, hidden)
+
+    def forward(self, obs: CellObs, action: Tensor) -> tuple[Tensor, Tensor]:
+        a = action[:, self.act_cells].reshape(action.shape[0], -1)
+        return self.mlp(flat_observation(obs, self.act_cells), a)

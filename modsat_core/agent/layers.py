@@ -12,14 +12,13 @@ from torch import Tensor, nn
 from modsat_core.codesign.features import CellObs
 
 
-def mlp(sizes: list[int], layer_norm: bool = False) -> nn.Sequential:
-    """Linear layers with ReLU between them (none after the last); ``layer_norm`` puts a
-    LayerNorm before each ReLU (`training.critic_layer_norm`)."""
+def mlp(sizes: list[int]) -> nn.Sequential:
+    """Linear layers with ReLU between them (none after the last)."""
     layers: list[nn.Module] = []
     for i in range(len(sizes) - 1):
         layers.append(nn.Linear(sizes[i], sizes[i + 1]))
         if i < len(sizes) - 2:
-            layers += [nn.LayerNorm(sizes[i + 1]), nn.ReLU()] if layer_norm else [nn.ReLU()]
+            layers.append(nn.ReLU())
     return nn.Sequential(*layers)
 
 

@@ -88,10 +88,10 @@ class CellCritic(nn.Module):
     diluted as much (docs/learning.md).
     """
 
-    def __init__(self, n_features: int, hidden: list[int], layer_norm: bool = False):
+    def __init__(self, n_features: int, hidden: list[int]):
         super().__init__()
-        self.q1 = mlp([n_features + 6, *hidden, 1], layer_norm)
-        self.q2 = mlp([n_features + 6, *hidden, 1], layer_norm)
+        self.q1 = mlp([n_features + 6, *hidden, 1])
+        self.q2 = mlp([n_features + 6, *hidden, 1])
 
     def forward(self, obs: CellObs, action: Tensor) -> tuple[Tensor, Tensor]:
         mean_a = masked_mean(action, obs.act_mask)
@@ -200,13 +200,13 @@ class _SetCriticPhase(nn.Module):
     layers are fused into one.
     """
 
-    def __init__(self, n_features: int, hidden: list[int], cell_width: int, layer_norm: bool = False):
+    def __init__(self, n_features: int, hidden: list[int], cell_width: int):
         super().__init__()
         self.width = cell_width
         self.state_encoder = nn.Sequential(nn.Linear(n_features, 2 * cell_width), nn.ReLU(inplace=True))
         self.action_encoder = nn.Sequential(nn.Linear(n_features + 3, 2 * cell_width), nn.ReLU())
-        self.q1 = mlp([2 * cell_width + n_features + 3, *hidden, 1], layer_norm)
-        self.q2 = mlp([2 * cell_width + n_features + 3, *hidden, 1], layer_norm)
+        self.q1 = mlp([2 * cell_width + n_features + 3, *hidden, 1])
+        self.q2 = mlp([2 * cell_width + n_features + 3, *hidden, 1])
 
     def forward(self, x: Tensor, act_mask: Tensor, value_mask: Tensor, action: Tensor) -> tuple[Tensor, Tensor]:
         B = x.shape[0]
@@ -228,10 +228,10 @@ class _SetCriticPhase(nn.Module):
 class SetCritic(nn.Module):
     """Twin critics of the set architecture, one pair per phase (see :class:`SetActor`)."""
 
-    def __init__(self, n_features: int, hidden: list[int], layer_norm: bool = False, cell_width: int = SET_CELL_WIDTH):
+    def __init__(self, n_features: int, hidden: list[int], cell_width: int = SET_CELL_WIDTH):
         super().__init__()
-        self.design = _SetCriticPhase(n_features, hidden, cell_width, layer_norm)
-        self.control = _SetCriticPhase(n_features, hidden, cell_width, layer_norm)
+        self.design = _SetCriticPhase(n_features, hidden, cell_width)
+        self.control = _SetCriticPhase(n_features, hidden, cell_width)
 
     def forward(self, obs: CellObs, action: Tensor) -> tuple[Tensor, Tensor]:
         d = obs.design
@@ -265,7 +265,7 @@ def make_actor(network: str, n_features: int, hidden: list[int], odd_control: bo
     return _ACTORS[network](n_features, list(hidden), odd_control)
 
 
-def make_critic(network: str, n_features: int, hidden: list[int], layer_norm: bool = False) -> nn.Module:
-    """The twin critic that goes with :func:`make_actor`'s actor (``layer_norm``: see :func:`mlp`)."""
+def make_critic(network: str, n_features: int, hidden: list[int]) -> nn.Module:
+    """The twin critic that goes with :func:`make_actor`'s actor."""
     _check(network)
-    return _CRITICS[network](n_features, list(hidden), layer_norm)
+    return _CRITICS[network](n_features, list(hidden))

@@ -59,21 +59,6 @@ class TD3:
         self.actor_opt = torch.optim.Adam(actor.parameters(), lr=cfg.actor_lr)
         self.critic_opt = torch.optim.Adam(critic.parameters(), lr=cfg.critic_lr)
         self.updates = 0
-        self.policy_noise = cfg.policy_noise  # the target smoothing std now (a schedule may move it)
-
-    def set_lr_scale(self, scale: float) -> None:
-        """Both optimisers' learning rates at ``scale`` times the configured ones."""
-        for opt, lr in ((self.actor_opt, self.cfg.actor_lr), (self.critic_opt, self.cfg.critic_lr)):
-            for group in opt.param_groups:
-                group["lr"] = lr * scale
-
-    def schedule(self, t, env_steps: int) -> None:
-        """Before an update: the learning rates and the target smoothing a spec's ``training``
-        section schedules for ``env_steps`` (nothing changes where it schedules none)."""
-        if t.lr_final_fraction is not None:
-            self.set_lr_scale(t.lr_scale_at(env_steps))
-        if t.policy_noise_final is not None:
-            self.policy_noise = t.policy_noise_at(env_steps)
 
     def update(
         self,
@@ -83,26 +68,22 @@ class TD3:
         next_obs,
         terminal: Tensor,
         generator: torch.Generator,
-        discount: Tensor | None = None,
         actor_rows: Tensor | None = None,
     ) -> dict[str, float]:
         """One TD3 step on a batch; the actor and targets move every ``policy_delay`` calls.
 
-        ``discount``: per-row factor of the bootstrapped value (``gamma ** m`` for an m-step
-        return, :meth:`ReplayBuffer.sample_n_step`); default ``gamma``. ``actor_rows``: (B,)
-        bool, the rows whose actions the actor step improves (default all); the critic
-        learns from every row."""
+        ``actor_rows``: (B,) bool, the rows whose actions the actor step improves (default
+        all); the critic learns from every row."""
         cfg = self.cfg
         with torch.no_grad():
             next_a = self.actor_target(next_obs)
-            noise = torch.randn(next_a.shape, generator=generator, device=next_a.device) * self.policy_noise
+            noise = torch.randn(next_a.shape, generator=generator, device=next_a.device) * cfg.policy_noise
             # finish: a static method of each actor class; typed nn.Module, mypy sees __getattr__'s Tensor | Module.
             next_a = self.actor_target.finish(  # type: ignore[operator]
                 next_obs, next_a + noise.clamp(-cfg.noise_clip, cfg.noise_clip)
             )
             q1_t, q2_t = self.critic_target(next_obs, next_a)
-            gamma = cfg.gamma if discount is None else discount
-            y = reward + gamma * (1.0 - terminal.to(reward.dtype)) * torch.minimum(q1_t, q2_t)
+            y = reward + cfg.gamma * (1.0 - terminal.to(reward.dtype)) * torch.minimum(q1_t, q2_t)
         q1, q2 = self.critic(obs, action)
         critic_loss = nn.functional.mse_loss(q1, y) + nn.functional.mse_loss(q2, y)
         self.critic_opt.zero_grad(set_to_none=True)
@@ -194,37 +175,6 @@ class ReplayBuffer:
         idx = torch.randint(0, self.size, (n,), generator=generator)
         return {k: t[idx] for k, t in self.data.items()}
 
-    def sample_n_step(
-        self, n: int, steps: int, rows_per_step: int, gamma: float, generator: torch.Generator
-    ) -> tuple[dict[str, Tensor], Tensor]:
-        """A batch of ``steps``-step transitions, and each one's bootstrap discount.
-
-        The buffer must be filled ``rows_per_step`` rows at a time, one per parallel episode in
-        a fixed order (as :class:`~modsat_core.training.train.TD3Run` adds them), with a bool field
-        ``done`` (the episode ended at that row) and ``reward``, ``terminal`` and ``next_*``
-        fields. Row ``i + k * rows_per_step`` is then the k-th next step of row i's episode.
-        For each sampled row the rewards of up to ``steps`` steps are summed, discounted
-        (``reward``), and ``next_*`` and ``terminal`` come from the last of them; the return
-        stops early at the end of the episode or at the newest row. The discount is
-        ``gamma ** m`` for the m steps taken."""
-        idx = torch.randint(0, self.size, (n,), generator=generator)
-        ahead = (self.pos - 1 - idx) % self.capacity  # rows written after each sampled row
-        reward = self.data["reward"][idx].float()
-        last = idx.clone()
-        discount = torch.full((n,), gamma)
-        alive = ~self.data["done"][idx]
-        for k in range(1, steps):
-            alive &= ahead >= k * rows_per_step
-            j = (idx + k * rows_per_step) % self.capacity
-            reward += torch.where(alive, gamma**k * self.data["reward"][j].float(), 0.0)
-            last = torch.where(alive, j, last)
-            discount = torch.where(alive, torch.full_like(discount, gamma ** (k + 1)), discount)
-            alive &= ~self.data["done"][j]
-        out = {k: t[idx] for k, t in self.data.items() if not k.startswith("next_")}
-        out.update({k: t[last] for k, t in self.data.items() if k.startswith("next_")})
-        out["reward"], out["terminal"] = reward, self.data["terminal"][last]
-        return out, discount
-
     def state_dict(self) -> dict:
         return {"pos": self.pos, "size": self.size, "data": {k: t[: self.size].clone() for k, t in self.data.items()}}
 
@@ -233,5 +183,5 @@ class ReplayBuffer:
         for k, t in self.data.items():
             if k in d["data"]:
                 t[: self.size] = d["data"][k]
-            else:  # a field added since (``done``, only read by n-step returns): zeros
+            else:  # a field this checkpoint's buffer predates: zeros
                 t[: self.size] = 0

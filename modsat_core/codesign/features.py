@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from modsat_core.grid import ACTUATOR, EMPTY
+from modsat_core.grid import ACTUATOR, EMPTY, valid_mask
 from modsat_core.sim.mission import error_quaternion
-from modsat_core.sim.morphology import mass_properties_batched, valid_mask_batched
+from modsat_core.sim.morphology import mass_properties_batched
 
 N_COMMON, N_DESIGN, N_CONTROL = 11, 19, 23
 N_FEATURES = N_COMMON + N_DESIGN + N_CONTROL
@@ -190,7 +190,7 @@ def cell_observation(
     # Only designing rows can be invalid: a satellite flies only if its grid was valid.
     valid = torch.ones(B, dtype=torch.bool, device=dev)
     if bool(design.any()):
-        valid[design] = valid_mask_batched(grids[design])
+        valid[design] = valid_mask(grids[design])
     per_sat = torch.stack(
         (
             design.to(torch.float32),

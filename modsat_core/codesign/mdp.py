@@ -22,15 +22,15 @@ import torch
 from torch import Tensor
 
 from modsat_core.codesign.features import CellObs, PhysState, cell_observation
-from modsat_core.grid import ACTUATOR
-from modsat_core.sim.mission import draw_episode, error_quaternion, relabel, return_bounds
+from modsat_core.grid import ACTUATOR, valid_mask
+from modsat_core.sim.mission import draw_episode, return_bounds
 from modsat_core.sim.morphology import (
     mass_properties_batched,
     seed_component_batched,
-    valid_mask_batched,
 )
 from modsat_core.sim.slew import SlewSim
-from modsat_core.spec.jobspec import JobSpec, Mission
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.limits import REPLAY_STATE
 
 
 def effective_invalid_penalty(spec: JobSpec) -> float:
@@ -56,7 +56,8 @@ class Compact:
     omega_B: Tensor  # (B, 3) float32
     h_cells: Tensor  # (B, C, 3) float16, wheel momentum / scale
 
-    FIELDS = ("grid", "design_step", "q_BN", "q_TN", "omega_B", "h_cells")
+    #: The replay's state fields, in its order (spec.limits.REPLAY_STATE: the layout's one table).
+    FIELDS = tuple(name for name, _, _ in REPLAY_STATE)
 
     def as_dict(self, prefix: str = "") -> dict[str, Tensor]:
         return {prefix + k: getattr(self, k) for k in self.FIELDS}
@@ -72,20 +73,6 @@ def observe_compact(c: Compact, N: int, design_steps: int, rate_limit_rad_s: flo
     phys = PhysState(q_BN=c.q_BN.float(), q_TN=c.q_TN.float(), omega_B=c.omega_B.float(), h_cells=c.h_cells.float())
     return cell_observation(
         c.grid.long().reshape(B, N, N, N), c.design_step.long(), design_steps, phys, rate_limit_rad_s
-    )
-
-
-def relabel_rows(b: dict[str, Tensor], design_steps: int, mission: Mission, cone_deg: float) -> Tensor:
-    """A replayed batch's rewards with the hold terms paid inside ``cone_deg`` (a tolerance
-    curriculum): flight rows recomputed from their states; design steps and episode ends kept."""
-    return relabel(
-        b["reward"],
-        error_quaternion(b["obs_q_TN"].float(), b["obs_q_BN"].float()),
-        error_quaternion(b["next_q_TN"].float(), b["next_q_BN"].float()),
-        b["next_omega_B"].float(),
-        b["terminal"] | (b["obs_design_step"] < design_steps),
-        mission,
-        cone_deg,
     )
 
 
@@ -187,7 +174,7 @@ class CoDesignEnv:
             if len(last):
                 if self.spec.design.repair:
                     self.grids[last] = seed_component_batched(self.grids[last])
-                valid = valid_mask_batched(self.grids[last])
+                valid = valid_mask(self.grids[last])
                 bad, good = last[~valid], last[valid]
                 reward[bad] = self.penalty
                 terminal[bad] = True

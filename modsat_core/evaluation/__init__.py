@@ -1,1 +1,2 @@
-"""Monte-Carlo evaluation, snapshot selection, a run's output files and the study report."""
+"""Monte-Carlo evaluation, snapshot selection, a run's output files, the one reader of a run folder
+and the study report."""

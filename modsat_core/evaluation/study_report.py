@@ -1,7 +1,8 @@
 """The figure, the table and the designs of a set of saved runs (a study: one mission, several
 seeds, RL co-design and its GA twin), from the files each run wrote (``modsat train --out``).
 
-Torch-free: it reads ``spec.json``, ``curve.json``, ``design.json`` and ``evaluation.json``.
+Torch-free: it reads ``spec.json``, ``curve.json``, ``design.json`` and ``evaluation.json``
+(through :class:`~modsat_core.evaluation.run_folder.RunFolder`).
 
 * Learning curves: each run's points (RL: the current policy's evaluation; GA: the best design so
   far, its fitness) held from one evaluation to the next, then mean and standard deviation over the
@@ -16,15 +17,15 @@ from __future__ import annotations
 
 import io
 import json
-import os
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from modsat_core.artefacts import ArtefactError, CurveFile, DesignReport, EvaluationReport, EvaluationSummary
+from modsat_core.evaluation.run_folder import RunFolder
 from modsat_core.grid import ACTUATOR, EMPTY, describe
-from modsat_core.spec.jobspec import JobSpec, parse_spec
+from modsat_core.spec.jobspec import JobSpec
 
 LABELS = {
     "td3-codesign": "RL co-design",
@@ -32,6 +33,7 @@ LABELS = {
     "td3-control": "TD3 (fixed design)",
     "diffsim-control": "first-order (fixed design)",
 }
+#: The files of a finished run the report reads (:func:`saved_run`).
 FILES = ("spec.json", "curve.json", "design.json", "evaluation.json")
 
 
@@ -51,31 +53,10 @@ class SavedRun:
         return LABELS.get(self.spec.algorithm, self.spec.algorithm)
 
 
-def load_run(path: str) -> SavedRun:
-    """One finished run's files; an :class:`ArtefactError` names the run and the file that is missing or wrong."""
-    data = {}
-    for name in FILES:
-        p = os.path.join(path, name)
-        if not os.path.isfile(p):
-            raise ArtefactError(f"{path}: no {name} (not a finished run written by `modsat train --out`)")
-        with open(p, "rb") as fh:
-            data[name] = fh.read()
-    return run_from_files(path, data)
-
-
-def run_from_files(path: str, data: dict[str, bytes]) -> SavedRun:
-    """A finished run from the bytes of its :data:`FILES` (a directory's, or a job's artefacts)."""
-    try:
-        spec = parse_spec(data["spec.json"])
-    except ValueError as exc:
-        raise ArtefactError(f"{path}/spec.json: {exc}") from None
-    return SavedRun(
-        path=path,
-        spec=spec,
-        curve=CurveFile.parse(data["curve.json"], f"{path}/curve.json"),
-        design=DesignReport.parse(data["design.json"], f"{path}/design.json"),
-        evaluation=EvaluationReport.parse(data["evaluation.json"], f"{path}/evaluation.json"),
-    )
+def saved_run(run: RunFolder) -> SavedRun:
+    """One finished run, from its folder (a directory, or a job's artefacts); an
+    :class:`ArtefactError` names the run and the file that is missing or wrong."""
+    return SavedRun(path=run.path, spec=run.spec(), curve=run.curve(), design=run.design(), evaluation=run.evaluation())
 
 
 def check_comparable(runs: list[SavedRun]) -> None:

@@ -84,7 +84,6 @@ def reward(
     omega_norm: Tensor,
     mission: Mission,
     steps_left: Tensor | None = None,
-    cone_rad: float | None = None,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Per-step reward (Elkins et al. 2020) and safety violation.
 
@@ -95,12 +94,10 @@ def reward(
     phi <= tolerance, minus ``rate_margin_penalty`` times how far the rate is into the margin below
     the limit (from ``rate_margin_fraction`` of it); a rate above the limit ends the episode
     with ``-safety_penalty`` (minus ``safety_penalty_per_remaining_step`` for each of the
-    ``steps_left`` control steps it had left). ``cone_rad``: the cone of the hold terms in place
-    of the tolerance (a tolerance curriculum, `training.hold_cone_start_deg`). Returns (reward,
-    in_cone, violated), each (B,).
+    ``steps_left`` control steps it had left). Returns (reward, in_cone, violated), each (B,).
     """
     r: RewardSpec = mission.reward
-    tol = mission.tolerance_deg * quat.DEG if cone_rad is None else cone_rad
+    tol = mission.tolerance_deg * quat.DEG
     in_tol = phi_rad <= tol
     rew = torch.exp(-phi_rad / r.error_scale_rad)
     no_progress = phi_rad >= phi_prev_rad
@@ -121,19 +118,6 @@ def reward(
         penalty = penalty - r.safety_penalty_per_remaining_step * steps_left.to(rew.dtype)
     rew = torch.where(violated, penalty, rew)
     return rew, in_tol, violated
-
-
-def relabel(
-    stored: Tensor, q_BT: Tensor, q_BT_next: Tensor, omega_next: Tensor, keep: Tensor, mission: Mission, cone_deg: float
-) -> Tensor:
-    """Replayed flight rewards recomputed with the hold terms paid inside ``cone_deg``.
-
-    From the error quaternions before and after each transition and the body rate after it;
-    the rows in ``keep`` (an episode's end by violation or invalid design, design steps) keep
-    their stored reward, which no cone changes."""
-    phi_prev, phi = quat.error_angle(q_BT), quat.error_angle(q_BT_next)
-    new, _, _ = reward(phi, phi_prev, omega_next.norm(dim=-1), mission, cone_rad=cone_deg * quat.DEG)
-    return torch.where(keep, stored, new.to(stored.dtype))
 
 
 def return_bounds(mission: Mission) -> tuple[float, float]:

@@ -2,7 +2,8 @@
 
 A design is an integer grid ``(N, N, N)``: 0 empty, 1 structure, 2 actuator (a 3-axis
 reaction-wheel unit). A design is *valid* when its modules are face-connected
-(6-neighbourhood) and it has at least one actuator.
+(6-neighbourhood) and it has at least one actuator: the rule is
+:func:`modsat_core.grid.valid_mask`, torch-free, which also takes tensors.
 
 Body frame B: origin at the centre of mass, axes along the grid's i, j, k index
 directions (right-handed). The cell (i, j, k) has its centre at ``a * (i, j, k)`` in grid
@@ -12,7 +13,7 @@ the third axis; that changes no moment of inertia.)
 Inertia tensor convention: ``I = sum_m [ m a^2/6 E + m (|r|^2 E - r r^T) ]``, so the
 off-diagonal entries are the *negatives* of the products of inertia ``sum m x y``.
 
-Single-design functions use numpy (float64); the ``*_batched`` twins take torch tensors
+Single-design functions use numpy (float64); the ``*_batched`` ones take torch tensors
 ``(B, N, N, N)`` for the learning code.
 """
 
@@ -24,7 +25,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from modsat_core.grid import ACTUATOR, as_grid
+from modsat_core.grid import ACTUATOR, as_grid, flood_fill
 
 
 @dataclass(frozen=True)
@@ -79,42 +80,6 @@ def mass_properties(design, module_mass_kg: float = 1.0, module_size_m: float = 
 # ----------------------------------------------------------------------------- batched
 
 
-def _flood_fill(reached: Tensor, filled: Tensor) -> Tensor:
-    """Grow ``reached`` (B, N, N, N) bool by 6-neighbour dilation inside ``filled`` until it stops."""
-    while True:
-        grown = reached.clone()
-        grown[:, 1:] |= reached[:, :-1]
-        grown[:, :-1] |= reached[:, 1:]
-        grown[:, :, 1:] |= reached[:, :, :-1]
-        grown[:, :, :-1] |= reached[:, :, 1:]
-        grown[:, :, :, 1:] |= reached[:, :, :, :-1]
-        grown[:, :, :, :-1] |= reached[:, :, :, 1:]
-        grown &= filled
-        if torch.equal(grown, reached):
-            return reached
-        reached = grown
-
-
-def valid_mask_batched(grids: Tensor) -> Tensor:
-    """Validity of B designs at once: (B, N, N, N) integer -> (B,) bool.
-
-    Flood fill by repeated 6-neighbour dilation restricted to filled cells, started from
-    one filled cell per design; at most N^3 iterations, usually about N.
-    """
-    filled = grids > 0
-    B = grids.shape[0]
-    flat = filled.reshape(B, -1)
-    any_filled = flat.any(dim=1)
-    first = flat.float().argmax(dim=1)
-    reached = torch.zeros_like(flat)
-    reached[torch.arange(B, device=grids.device), first] = any_filled
-    reached = reached.reshape(filled.shape)
-    reached = _flood_fill(reached, filled)
-    connected = (reached == filled).reshape(B, -1).all(dim=1)
-    has_act = (grids == ACTUATOR).reshape(B, -1).any(dim=1)
-    return any_filled & connected & has_act
-
-
 def seed_component_batched(grids: Tensor) -> Tensor:
     """Repair B designs so each is valid: the centre (seed) cell becomes an actuator and
     every module not face-connected to it is removed. (B, N, N, N) -> a new tensor."""
@@ -125,7 +90,7 @@ def seed_component_batched(grids: Tensor) -> Tensor:
     filled = g > 0
     reached = torch.zeros_like(filled)
     reached[:, c, c, c] = True
-    reached = _flood_fill(reached, filled)
+    reached = flood_fill(reached, filled)
     return torch.where(reached, g, torch.zeros_like(g))
 
 

@@ -34,6 +34,7 @@ __all__ = [
     "UnrunnableSpec",
     "format_errors",
     "parse_spec",
+    "spec_errors",
 ]
 
 SPEC_VERSION: Literal[1] = 1
@@ -65,17 +66,6 @@ class JobSpec(_Section):
             raise ValueError(f"algorithm {self.algorithm!r} needs design.fixed_design")
         if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
             raise ValueError("modules.momentum_capacity_Nms is only meaningful with actuator_model 'reaction-wheel'")
-        cone = self.training.hold_cone_start_deg
-        if cone is not None and cone < self.mission.tolerance_deg:
-            raise ValueError(
-                f"training.hold_cone_start_deg ({cone}) must be at least mission.tolerance_deg "
-                f"({self.mission.tolerance_deg}): the curriculum's cone shrinks to the tolerance"
-            )
-        if cone is not None and self.training.n_step > 1:
-            raise ValueError(
-                "training.hold_cone_start_deg works with one-step returns only (training.n_step 1): "
-                "an n-step return's rewards are summed in the buffer's sample, before they could be recomputed"
-            )
         return self
 
 
@@ -138,10 +128,21 @@ def _range_text(node: dict[str, Any]) -> str | None:
     return " and ".join(s for s in (lo_s, hi_s) if s)
 
 
+def spec_errors(exc: ValidationError) -> list[ErrorDetails]:
+    """pydantic's errors, a removed key's (``training.REMOVED_KEYS``) located at the key: its
+    section's validator raised it, and the API and the CLI name the field from the location."""
+    out = []
+    for err in exc.errors(include_url=False):
+        if err["type"] == "removed_field":
+            err["loc"] = (*err["loc"], err["ctx"]["field"])
+        out.append(err)
+    return out
+
+
 def format_errors(exc: ValidationError) -> list[str]:
     """One line per pydantic error: field path, offending value, and what is allowed."""
     out = []
-    for err in exc.errors():
+    for err in spec_errors(exc):
         loc = tuple(p for p in err["loc"])
         path = ".".join(str(p) for p in loc) or "(spec)"
         kind = err["type"]
@@ -157,6 +158,8 @@ def format_errors(exc: ValidationError) -> list[str]:
             out.append(f"{path}: {value!r} is out of range; allowed: {rng}")
         elif kind == "literal_error":
             out.append(f"{path}: {value!r} is not allowed; {err['msg'].lower()}")
+        elif kind == "removed_field":
+            out.append(f"{path}: {err['msg']}")
         elif kind == "value_error" or kind == "assertion_error":
             msg = err["msg"].removeprefix("Value error, ")
             out.append(f"{path}: {msg}")
@@ -180,4 +183,4 @@ def parse_spec(data: dict[str, Any] | str | bytes) -> JobSpec:
         # Strict: "3" is not the integer 3 and true is not 1 (JSON numbers are still floats).
         return JobSpec.model_validate_json(data, strict=True)
     except ValidationError as exc:
-        raise SpecError(format_errors(exc), exc.errors(include_url=False)) from None
+        raise SpecError(format_errors(exc), spec_errors(exc)) from None

@@ -8,7 +8,8 @@ evaluate) and says, naming the field to change, where a limit is exceeded. It im
 torch, so the API process can check a submission cheaply.
 
 The memory figure is an estimate, on the high side, of the largest allocations: the replay
-buffer (exact: the compact layout of ``train.replay_fields``), one TD3 update's activations
+buffer (exact: the compact replay row, :data:`REPLAY_STATE` and :data:`REPLAY_ROW`, which the
+buffer itself is built from), one TD3 update's activations
 (features of both states, every layer's output kept for the backward pass, actor, target
 actor and four critic passes), the per-step features of the training envs, and the
 Monte-Carlo evaluation's batch. docs/service.md ("Limits") lists the defaults.
@@ -16,6 +17,7 @@ Monte-Carlo evaluation's batch. docs/service.md ("Limits") lists the defaults.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from modsat_core.spec.jobspec import JobSpec, is_diffsim
@@ -43,19 +45,46 @@ BASE_BYTES = 600 * 2**20
 GIB = 2**30
 
 
-def transition_bytes(N: int) -> int:
-    """Bytes of one replay transition on an N^3 grid (two compact states, action, reward, terminal).
+#: The compact replay row, one table for the buffer (``training.checkpoint.replay_fields`` makes
+#: torch dtypes of the names) and for the memory estimate here: name, shape ("C" is the number
+#: of cells, N^3), dtype. A state: the grid (a type per cell), the design step, q_BN, q_TN, the
+#: body rate and each cell's wheel momentum; a row holds two states, "obs_" and "next_".
+REPLAY_STATE: tuple[tuple[str, tuple[int | str, ...], str], ...] = (
+    ("grid", ("C",), "uint8"),
+    ("design_step", (), "int16"),
+    ("q_BN", (4,), "float32"),
+    ("q_TN", (4,), "float32"),
+    ("omega_B", (3,), "float32"),
+    ("h_cells", ("C", 3), "float16"),
+)
+#: The rest of a row: the action (three numbers per cell), the reward and whether it was terminal.
+REPLAY_ROW: tuple[tuple[str, tuple[int | str, ...], str], ...] = (
+    ("action", ("C", 3), "float16"),
+    ("reward", (), "float32"),
+    ("terminal", (), "bool"),
+)
+_ITEM_BYTES = {"uint8": 1, "bool": 1, "int16": 2, "float16": 2, "float32": 4}
 
-    Per state: the grid (uint8 per cell), the design step (int16), q_BN, q_TN (4 float32 each),
-    omega (3 float32), the wheel momenta (3 float16 per cell); the action is 3 float16 per cell;
-    reward (float32), terminal and done (bool)."""
+
+def replay_layout(N: int) -> dict[str, tuple[tuple[int, ...], str]]:
+    """The fields of one replay transition on an N^3 grid: name -> (shape, dtype name)."""
     C = N**3
-    state = C + 2 + 16 + 16 + 12 + 6 * C
-    return 2 * state + 6 * C + 4 + 1 + 1
+
+    def shape(dims: tuple[int | str, ...]) -> tuple[int, ...]:
+        return tuple(C if d == "C" else int(d) for d in dims)
+
+    fields = {f"{side}_{k}": (shape(dims), dt) for side in ("obs", "next") for k, dims, dt in REPLAY_STATE}
+    fields.update({k: (shape(dims), dt) for k, dims, dt in REPLAY_ROW})
+    return fields
+
+
+def transition_bytes(N: int) -> int:
+    """Bytes of one replay transition on an N^3 grid (:func:`replay_layout`)."""
+    return sum(math.prod(shape) * _ITEM_BYTES[dt] for shape, dt in replay_layout(N).values())
 
 
 def replay_capacity(spec: JobSpec) -> int:
-    """The transitions a run's buffer holds (as ``train.TD3Run`` allocates it)."""
+    """The transitions a run's buffer holds (as :class:`~modsat_core.training.td3_trainer.TD3Run` allocates it)."""
     t = spec.training
     return min(t.buffer_size, max(t.total_env_steps, t.batch_size))
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pydantic import ValidationError
 
-from modsat_core.spec.jobspec import JobSpec, SpecError, format_errors
+from modsat_core.spec.jobspec import JobSpec, SpecError, format_errors, spec_errors
 
 MAX_SEEDS = 16
 ALGORITHMS = ("td3-codesign", "ga", "td3-control", "diffsim-control")
@@ -60,7 +60,7 @@ def study_specs(base: JobSpec, seeds: list[int], algorithms: list[str]) -> list[
         try:
             spec = JobSpec.model_validate({**base.model_dump(mode="json"), "algorithm": alg})
         except ValidationError as exc:  # e.g. `td3-control` on a spec without `design.fixed_design`
-            raise SpecError([f"{alg}: {m}" for m in format_errors(exc)], exc.errors()) from None
+            raise SpecError([f"{alg}: {m}" for m in format_errors(exc)], spec_errors(exc)) from None
         out += [spec.model_copy(update={"seed": s}) for s in seeds]
     return out
 

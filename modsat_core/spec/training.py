@@ -4,14 +4,28 @@ sections are in :mod:`modsat_core.spec.sections`)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Any, Literal
+import json
+from typing import Annotated, Any, Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 from modsat_core.spec.sections import _Section
 
-if TYPE_CHECKING:  # validating a spec imports no torch (tests/core/test_layers.py)
-    from torch import Tensor
+#: Keys removed from this section, each with the value that made it a no-op. A saved run's
+#: spec.json lists every key of its day, so one that holds the no-op value still loads (the key
+#: is dropped); any other value is refused by name (docs/lab/2026-12-05-unused-knobs-removed.md).
+REMOVED_KEYS: dict[str, bool | int | None] = {
+    "exploration_noise_decay_steps": None,
+    "exploration_noise_min": None,
+    "lr_final_fraction": None,
+    "hold_cone_start_deg": None,
+    "hold_cone_steps": None,
+    "n_step": 1,
+    "critic_layer_norm": False,
+    "policy_noise_final": None,
+}
+REMOVED_KEYS_DOC = "docs/lab/2026-12-05-unused-knobs-removed.md"
 
 
 class Training(_Section):
@@ -47,57 +61,6 @@ class Training(_Section):
         description=(
             "If set, the exploration noise falls linearly from `exploration_noise` (when learning "
             "starts) to this value (at the end of the budget). null = constant noise (the paper)."
-        ),
-    )
-    exploration_noise_decay_steps: int | None = Field(
-        None,
-        ge=1,
-        le=1_000_000_000,
-        description=(
-            "Env steps (counted from `learning_starts`) over which the exploration noise falls to "
-            "`exploration_noise_final`, then stays there. null = over the whole budget."
-        ),
-    )
-    exploration_noise_min: float | None = Field(
-        None,
-        gt=0.0,
-        le=2.0,
-        description=(
-            "If set, each training episode draws its own noise std, log-uniformly between this and "
-            "the scheduled noise (FastTD3's per-environment noise scales, on a log scale): some "
-            "episodes explore widely while others fly near the deterministic policy and show the "
-            "critic the fine torques a hold needs. null = one std for every episode."
-        ),
-    )
-    lr_final_fraction: float | None = Field(
-        None,
-        gt=0.0,
-        le=1.0,
-        description=(
-            "If set, both learning rates fall linearly from their values (when learning starts) to "
-            "this fraction of them at the end of the budget: late updates fine-tune the policy "
-            "instead of moving it as far as the early ones. null = constant rates (the paper)."
-        ),
-    )
-    hold_cone_start_deg: float | None = Field(
-        None,
-        gt=0.0,
-        le=180.0,
-        description=(
-            "A tolerance curriculum: the reward's hold terms (the in-tolerance and settle bonuses, and "
-            "the progress penalty's exemption inside the cone) are paid inside a cone that starts at "
-            "this angle and shrinks geometrically to `mission.tolerance_deg` over `hold_cone_steps`. "
-            "Rewards are recomputed when a batch is sampled, so the replay follows the current cone; "
-            "success and every evaluation use the mission's tolerance. null = the mission's cone."
-        ),
-    )
-    hold_cone_steps: int | None = Field(
-        None,
-        ge=1,
-        le=1_000_000_000,
-        description=(
-            "Env steps (counted from `learning_starts`) over which the cone of `hold_cone_start_deg` "
-            "shrinks to the mission's tolerance, then stays there. null = over the whole budget."
         ),
     )
     design_exploration: float = Field(
@@ -167,23 +130,6 @@ class Training(_Section):
             "seen (e67: once released, the design went from 27 modules to 1 in 5k steps). 0 = off (the paper)."
         ),
     )
-    n_step: int = Field(
-        1,
-        ge=1,
-        le=20,
-        description=(
-            "Steps of reward summed before bootstrapping in the critic's target (n-step return, "
-            "stopping at the episode's end). 1 = the paper's one-step TD3."
-        ),
-    )
-    critic_layer_norm: bool = Field(
-        False,
-        description=(
-            "Layer normalisation before each ReLU of the critics' wide layers (as in "
-            "CrossQ, Bhatt et al. 2024, and FastTD3), against the critic's drift on the long "
-            "runs the paper's mission needs. false = the paper's critic."
-        ),
-    )
     odd_control: bool = Field(
         False,
         description=(
@@ -196,17 +142,6 @@ class Training(_Section):
         ),
     )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
-    policy_noise_final: float | None = Field(
-        None,
-        ge=0.0,
-        le=2.0,
-        description=(
-            "If set, the target smoothing std falls linearly from `policy_noise` (when learning "
-            "starts) to this value at the end of the budget: early on it steadies the critic, late "
-            "it would blur the small torques a hold needs (a 0.2 std kick is 0.03 rad/s per step on "
-            "the full 3x3x3 cube). null = constant (the paper)."
-        ),
-    )
     noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
     action_l2: float = Field(
         0.0,
@@ -237,10 +172,27 @@ class Training(_Section):
     checkpoint_every_steps: int = Field(50_000, ge=1, le=1_000_000_000)
     device: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` uses a GPU where torch sees one.")
 
-    def _schedule(self, start: float, final: float | None, env_steps: int, span: int | None = None) -> float:
+    @model_validator(mode="before")
+    @classmethod
+    def _drop_removed_keys(cls, data: Any) -> Any:
+        if not isinstance(data, dict) or not REMOVED_KEYS.keys() & data.keys():
+            return data
+        for key, noop in REMOVED_KEYS.items():
+            value = data.get(key, noop)
+            if type(value) is not type(noop) or value != noop:
+                # Located at the key by jobspec.spec_errors (a section's validator is located at the section).
+                raise PydanticCustomError(
+                    "removed_field",
+                    "removed from modsat (it was {value} here); only its no-op value {noop} is accepted, "
+                    "drop the key or set it to that (see {doc})",
+                    {"field": key, "value": json.dumps(value), "noop": json.dumps(noop), "doc": REMOVED_KEYS_DOC},
+                )
+        return {k: v for k, v in data.items() if k not in REMOVED_KEYS}
+
+    def _schedule(self, start: float, final: float | None, env_steps: int) -> float:
         if final is None:
             return start
-        span = max(self.total_env_steps - self.learning_starts, 1) if span is None else span
+        span = max(self.total_env_steps - self.learning_starts, 1)
         frac = min(max((env_steps - self.learning_starts) / span, 0.0), 1.0)
         return start + frac * (final - start)
 
@@ -257,34 +209,7 @@ class Training(_Section):
 
     def noise_at(self, env_steps: int) -> float:
         """The exploration noise std after ``env_steps`` steps (see `exploration_noise_final`)."""
-        return self._schedule(
-            self.exploration_noise, self.exploration_noise_final, env_steps, self.exploration_noise_decay_steps
-        )
-
-    def policy_noise_at(self, env_steps: int) -> float:
-        """The target smoothing std after ``env_steps`` steps (see `policy_noise_final`)."""
-        return self._schedule(self.policy_noise, self.policy_noise_final, env_steps)
-
-    def lr_scale_at(self, env_steps: int) -> float:
-        """The factor on both learning rates after ``env_steps`` steps (see `lr_final_fraction`)."""
-        return self._schedule(1.0, self.lr_final_fraction, env_steps)
-
-    def hold_cone_deg(self, env_steps: int, tolerance_deg: float) -> float:
-        """The cone of the reward's hold terms after ``env_steps`` steps (see `hold_cone_start_deg`)."""
-        start = self.hold_cone_start_deg
-        if start is None:
-            return tolerance_deg
-        return start * (tolerance_deg / start) ** self._schedule(0.0, 1.0, env_steps, self.hold_cone_steps)
-
-    def noise_stds(self, env_steps: int, u: Tensor) -> Tensor:
-        """Per-episode noise stds for the episodes' draws ``u`` in [0, 1) (see `exploration_noise_min`)."""
-        import torch
-
-        top = self.noise_at(env_steps)
-        low = self.exploration_noise_min
-        if low is None or top <= low:
-            return torch.full_like(u, top)
-        return low * (top / low) ** u
+        return self._schedule(self.exploration_noise, self.exploration_noise_final, env_steps)
 
     def design_exploration_at(self, env_steps: int) -> float:
         """The design exploration probability after ``env_steps`` steps."""

@@ -1,8 +1,8 @@
 """The run contract's pieces: callbacks, the result, checkpoints and the replay layout.
 
 What :func:`modsat_core.training.train.train` takes and gives back (docs/train-interface.md), the
-checkpoint codec, and the compact layout of a replay-buffer row (shared by training, the
-memory limits and the tests).
+checkpoint codec, and the replay buffer's fields (the compact row of
+:func:`modsat_core.spec.limits.replay_layout`, one table for the buffer and the memory limits).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import torch
 
 from modsat_core.agent.policy_file import load_plain
 from modsat_core.spec.jobspec import UnrunnableSpec
+from modsat_core.spec.limits import replay_layout
 
 try:
     from numpy._core import multiarray as np_multiarray  # numpy 2
@@ -94,28 +95,9 @@ def _plain(x):
 
 
 def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
-    """The compact transition layout: two compact states, the action, reward, terminal, and
-    ``done`` (the episode ended there, also by its time limit: where n-step returns stop)."""
-    C = N**3
-    state = {
-        "grid": ((C,), torch.uint8),
-        "design_step": ((), torch.int16),
-        "q_BN": ((4,), torch.float32),
-        "q_TN": ((4,), torch.float32),
-        "omega_B": ((3,), torch.float32),
-        "h_cells": ((C, 3), torch.float16),
-    }
-    fields = {f"obs_{k}": v for k, v in state.items()}
-    fields.update({f"next_{k}": v for k, v in state.items()})
-    fields.update(
-        {
-            "action": ((C, 3), torch.float16),
-            "reward": ((), torch.float32),
-            "terminal": ((), torch.bool),
-            "done": ((), torch.bool),
-        }
-    )
-    return fields
+    """The replay buffer's fields on an N^3 grid: the compact row of
+    :func:`modsat_core.spec.limits.replay_layout` (the table the memory limits read), in torch dtypes."""
+    return {name: (shape, getattr(torch, dt)) for name, (shape, dt) in replay_layout(N).items()}
 
 
 def replay_buffer_bytes(N: int, capacity: int) -> int:

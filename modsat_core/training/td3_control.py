@@ -1,18 +1,16 @@
 """``modsat bench control``: is a spec's mission learnable by TD3 at all, and at what cost?
 
-A diagnostic beside the co-design runs. It trains a plain MLP actor-critic pair with the
-project's TD3 update (the one `td3_gym` checks on Pendulum-v1) to fly one fixed design --
-`design.fixed_design`, else the full cube with the centre actuator -- on the spec's
-mission, from the satellite's flat state: the same 23 numbers the co-design network's
-control part sees on an actuator cell (error quaternion, its rate, body rate, the fine
-error channel, the wheel momentum). No design phase, no per-cell network: one row per
-state instead of N^3, so an update costs a fraction of a co-design update and the width of
-the network can be varied cheaply.
+A diagnostic beside the co-design runs. The co-design trainer (:class:`TD3Run`, its acting,
+replay and updates) trains a plain MLP actor-critic pair (:class:`FlatCellActor`) to fly one
+fixed design -- `design.fixed_design`, else the full cube with the centre actuator -- on the
+spec's mission, from the satellite's flat state: the control features of the co-design network
+(error quaternion, its rate, body rate, the fine error channel) and every actuator's wheel
+momentum. No design phase, no per-cell network: the width of the network can be varied cheaply.
 
 Uses the spec's mission, modules and training settings (envs, budget, network sizes,
-learning rates, batch, update ratio, noise). Every
-``eval_every`` env steps the deterministic actor flies the spec's final evaluation slews
-(`evaluation.episodes`, `evaluation.seed`), the same Monte-Carlo the co-design runs report.
+learning rates, batch, update ratio, noise). Every ``eval_every`` env steps the deterministic
+actor flies the spec's final evaluation slews (`evaluation.episodes`, `evaluation.seed`), the
+same Monte-Carlo the co-design runs report, in place of the run's learning curve.
 """
 
 from __future__ import annotations
@@ -22,17 +20,14 @@ from collections.abc import Callable
 
 import numpy as np
 import torch
-from torch import Tensor
 
-from modsat_core.agent.flat_networks import MLPActor, MLPCritic
-from modsat_core.agent.td3 import TD3, ReplayBuffer, TD3Config
-from modsat_core.codesign.features import control_globals
+from modsat_core.agent.policy import controller_for
 from modsat_core.evaluation.monte_carlo import monte_carlo
 from modsat_core.sim.gym_envs import reference_design
-from modsat_core.sim.mission import draw_episode, relabel
 from modsat_core.sim.pd import PDController
-from modsat_core.sim.slew import Design, SlewSim
+from modsat_core.sim.slew import Design
 from modsat_core.spec.jobspec import JobSpec
+from modsat_core.training.td3_trainer import TD3Run
 
 _CURVE_KEYS = (
     "mean_return",
@@ -46,27 +41,6 @@ _CURVE_KEYS = (
     "median_settling_time_s",
     "max_peak_rate_rad_s",
 )
-
-
-def flat_state(sim: SlewSim) -> Tensor:
-    """(B, 20 + 3K) float32: what the co-design control features hold, for the whole satellite."""
-    h = (sim.state.h_B / sim.h_scale_Nms).reshape(sim.B, -1)
-    glob = control_globals(sim.error_quaternion(), sim.state.omega_B, sim.mission.rate_limit_rad_s)
-    return torch.cat((glob, h), dim=-1).float()
-
-
-def flat_attitude(o: Tensor, rate_limit_rad_s: float) -> tuple[Tensor, Tensor]:
-    """The error quaternion and body rate a flat state holds (`control_globals` puts q_BT in its
-    first 4 numbers and omega / rate limit in its 9th to 11th)."""
-    return o[:, :4], o[:, 8:11] * rate_limit_rad_s
-
-
-class _Controller:
-    def __init__(self, actor: torch.nn.Module, K: int):
-        self.actor, self.K = actor, K
-
-    def __call__(self, sim: SlewSim) -> Tensor:
-        return self.actor(flat_state(sim)).reshape(sim.B, self.K, 3).to(sim.dtype)
 
 
 def bench_control(
@@ -87,35 +61,17 @@ def bench_control(
         else reference_design(spec.design.grid_size)
     )
     design = Design.from_grid(grid, spec.modules)
-    K, B = design.n_actuators, t.num_envs
     hidden = list(t.hidden_sizes)
-    torch.manual_seed(spec.seed)
-    gen = torch.Generator().manual_seed(spec.seed)
-    rngs = [np.random.default_rng([spec.seed, 1, i]) for i in range(B)]
-    sim = SlewSim.from_designs([design] * B, m, spec.modules, dtype=torch.float32)
-    sim.reset(list(range(B)), [draw_episode(r, m) for r in rngs])
-    obs_dim, act_dim = flat_state(sim).shape[1], 3 * K
-    critic = MLPCritic(obs_dim, act_dim, hidden, t.critic_layer_norm)
-    actor = MLPActor(obs_dim, act_dim, hidden, mirror_at=0 if t.odd_control else None)
-    agent = TD3(actor, critic, TD3Config.from_training(t))
-    buf = ReplayBuffer(
-        {
-            "o": ((obs_dim,), torch.float32),
-            "a": ((act_dim,), torch.float32),
-            "r": ((), torch.float32),
-            "o2": ((obs_dim,), torch.float32),
-            "d": ((), torch.bool),
-        },
-        capacity=min(t.buffer_size, max(t.total_env_steps, t.batch_size)),
-    )
+    run = TD3Run(spec, fixed_grid=grid, flat=True)
+    t0 = time.monotonic()
+    agent, B = run.agent, run.env.B
     curve: list[dict] = []
-    steps, credit, next_eval, t0 = 0, 0.0, eval_every, time.monotonic()
-    noise_u = torch.rand(B, generator=gen) if t.exploration_noise_min is not None else torch.zeros(B)
+    next_eval = eval_every
 
     def fly(actor: torch.nn.Module) -> dict:
         mc = monte_carlo(
             design,
-            _Controller(actor, K),
+            controller_for(actor, grid, spec),
             m,
             spec.modules,
             episodes=spec.evaluation.episodes,
@@ -128,7 +84,7 @@ def bench_control(
     def say(who: str, p: dict) -> None:
         if log is not None:
             log(
-                f"  {steps:,} steps, {agent.updates:,} updates, {p['wall_s']:,.0f} s{who}: return "
+                f"  {p['env_steps']:,} steps, {p['updates']:,} updates, {p['wall_s']:,.0f} s{who}: return "
                 f"{p['mean_return']:.1f}, success {100 * p['success_rate']:.0f} %, median error "
                 f"{p['median_final_error_deg']:.2f} deg, median final rate "
                 f"{p['median_final_rate_rad_s']:.4f} rad/s"
@@ -139,7 +95,7 @@ def bench_control(
     def evaluate() -> dict:
         nonlocal eval_s
         e0 = time.monotonic()
-        point: dict = {"env_steps": steps, "updates": agent.updates, "wall_s": round(e0 - t0, 1)}
+        point: dict = {"env_steps": run.env_steps, "updates": agent.updates, "wall_s": round(e0 - t0, 1)}
         point.update(fly(agent.actor))
         say("", point)
         if eval_target:
@@ -153,38 +109,13 @@ def bench_control(
     def out_of_time() -> bool:
         return max_wall_s is not None and time.monotonic() - t0 - eval_s >= max_wall_s
 
-    while steps + B <= t.total_env_steps and not out_of_time():
-        o = flat_state(sim)
-        if steps < t.learning_starts:
-            a = torch.rand((B, act_dim), generator=gen) * 2.0 - 1.0
-        else:
-            with torch.no_grad():
-                a = agent.actor(o)
-            std = t.noise_stds(steps, noise_u).unsqueeze(-1)
-            a = (a + torch.randn(a.shape, generator=gen) * std).clamp(-1.0, 1.0)
-        out = sim.step(a.reshape(B, K, 3))
-        buf.add({"o": o, "a": a, "r": out.reward.float(), "o2": flat_state(sim), "d": out.terminated})
-        ended = (out.terminated | out.truncated).nonzero().flatten().tolist()
-        if ended:
-            sim.reset(ended, [draw_episode(rngs[i], m) for i in ended])
-            if t.exploration_noise_min is not None:
-                noise_u[ended] = torch.rand(len(ended), generator=gen)
-        steps += B
-        if steps >= t.learning_starts and buf.size >= t.batch_size:
-            credit += B / t.train_frequency
-            while credit >= 1.0:
-                credit -= 1.0
-                agent.schedule(t, steps)
-                b = buf.sample(t.batch_size, gen)
-                if t.hold_cone_start_deg is not None:
-                    (q, _), (q2, omega2) = (flat_attitude(b[k], m.rate_limit_rad_s) for k in ("o", "o2"))
-                    b["r"] = relabel(b["r"], q, q2, omega2, b["d"], m, t.hold_cone_deg(steps, m.tolerance_deg))
-                agent.update(b["o"], b["a"], b["r"], b["o2"], b["d"], gen)
-        if steps >= next_eval:
+    while run.env_steps + B <= t.total_env_steps and not out_of_time():
+        run.step()
+        if run.env_steps >= next_eval:
             evaluate()
             next_eval += eval_every
     train_s = time.monotonic() - t0 - eval_s
-    if not curve or curve[-1]["env_steps"] != steps:
+    if not curve or curve[-1]["env_steps"] != run.env_steps:
         evaluate()
     pd = monte_carlo(
         design, PDController, m, spec.modules, episodes=spec.evaluation.episodes, seed=spec.evaluation.seed
@@ -197,7 +128,7 @@ def bench_control(
         "seed": spec.seed,
         "wall_s": round(time.monotonic() - t0, 1),
         "train_s": round(train_s, 1),
-        "env_steps": steps,
+        "env_steps": run.env_steps,
         "updates": agent.updates,
         "threads": torch.get_num_threads(),
         "curve": curve,

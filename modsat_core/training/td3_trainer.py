@@ -1,6 +1,7 @@
 """One TD3 run on the batched co-design MDP (or control of a fixed design): acting with
 exploration, the replay buffer, updates, learning-curve evaluations, the snapshot kept for
-the final evaluation, and its checkpoint state. Also the GA's inner loop.
+the final evaluation, and its checkpoint state. Also the GA's inner loop, and the loop of
+``modsat bench control`` (the flat networks on a fixed design, its own evaluations).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import copy
 import numpy as np
 import torch
 
+from modsat_core.agent.flat_networks import FlatCellActor, FlatCellCritic
 from modsat_core.agent.layers import finish
 from modsat_core.agent.networks import make_critic
 from modsat_core.agent.policy import design_with
@@ -17,7 +19,7 @@ from modsat_core.agent.policy_file import actor_from_state, new_actor
 from modsat_core.agent.td3 import TD3, ReplayBuffer, TD3Config
 from modsat_core.artefacts import ProgressRecord
 from modsat_core.codesign.features import N_FEATURES, CellObs
-from modsat_core.codesign.mdp import CoDesignEnv, Compact, observe_compact, relabel_rows
+from modsat_core.codesign.mdp import CoDesignEnv, Compact, EnvStep, observe_compact
 from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
 from modsat_core.spec.jobspec import JobSpec
@@ -33,19 +35,31 @@ from modsat_core.training.checkpoint import (
 
 
 class TD3Run:
-    """One TD3 training run on the batched MDP (co-design, or control of a fixed design)."""
+    """One TD3 training run on the batched MDP (co-design, or control of a fixed design).
 
-    def __init__(self, spec: JobSpec, *, fixed_grid: np.ndarray | None = None, device: str = "cpu"):
+    ``flat``: the flat MLP pair of ``modsat bench control`` (:class:`FlatCellActor`) instead of
+    the spec's co-design network, on a fixed design; the bench drives :meth:`step` and evaluates
+    on its own (:meth:`run`'s curve, selection and files expect the spec's network)."""
+
+    def __init__(self, spec: JobSpec, *, fixed_grid: np.ndarray | None = None, device: str = "cpu", flat: bool = False):
         if fixed_grid is None and spec.algorithm == "td3-control":
             fixed_grid = np.asarray(spec.design.fixed_design)
+        if flat and fixed_grid is None:
+            raise ValueError("the flat networks fly a fixed design: give fixed_grid")
         self.spec, self.t = spec, spec.training
         self.device = device
         self.fixed_grid = None if fixed_grid is None else np.asarray(fixed_grid, dtype=np.int64)
         self.env = CoDesignEnv(spec, self.t.num_envs, seed=spec.seed, fixed_grid=self.fixed_grid, device=device)
         torch.manual_seed(spec.seed)
-        actor = new_actor(spec).to(device)
-        critic = make_critic(self.t.network, N_FEATURES, list(self.t.hidden_sizes), self.t.critic_layer_norm).to(device)
-        self.agent = TD3(actor, critic, TD3Config.from_training(self.t))
+        hidden = list(self.t.hidden_sizes)
+        actor: torch.nn.Module
+        critic: torch.nn.Module
+        if flat and self.fixed_grid is not None:
+            actor = FlatCellActor(self.fixed_grid, hidden, self.t.odd_control)
+            critic = FlatCellCritic(self.fixed_grid, hidden)
+        else:
+            actor, critic = new_actor(spec), make_critic(self.t.network, N_FEATURES, hidden)
+        self.agent = TD3(actor.to(device), critic.to(device), TD3Config.from_training(self.t))
         capacity = min(self.t.buffer_size, max(self.t.total_env_steps, self.t.batch_size))
         self.buffer = ReplayBuffer(replay_fields(self.env.N), capacity, device=device)
         self.gen = torch.Generator(device=device).manual_seed(spec.seed)
@@ -62,10 +76,6 @@ class TD3Run:
         self.recent: list[dict] = []  # finished training episodes since the last progress call
         self.last_info: dict = {}
         self.explore_design = torch.ones(self.env.B, dtype=torch.bool, device=device)
-        # Each episode's place in [exploration_noise_min, noise], drawn when it starts (only
-        # with `exploration_noise_min`: runs without it keep their random streams).
-        self.noise_u = torch.zeros(self.env.B, device=device)
-        self._draw_noise(torch.ones(self.env.B, dtype=torch.bool, device=device))
 
     # ------------------------------------------------------------------ acting
     def _act(self, obs: CellObs) -> torch.Tensor:
@@ -76,8 +86,7 @@ class TD3Run:
         else:
             with torch.no_grad():
                 a = self.agent.actor(obs)
-        std = self.t.noise_stds(self.env_steps, self.noise_u).reshape(B, 1, 1)
-        noise = torch.randn(a.shape, generator=self.gen, device=self.device) * std
+        noise = torch.randn(a.shape, generator=self.gen, device=self.device) * self.t.noise_at(self.env_steps)
         explore = self._explored_designs(obs)
         # Designing rows of an episode whose design is not explored grow the policy's own design.
         a = a + noise * (~obs.design | explore).reshape(B, 1, 1)
@@ -96,11 +105,6 @@ class TD3Run:
             rand = torch.rand((B, C, 3), generator=self.gen, device=self.device) * 2.0 - 1.0
             a = torch.where(obs.design.reshape(B, 1, 1), a, rand)
         return finish(obs, a)
-
-    def _draw_noise(self, starting: torch.Tensor) -> None:
-        if self.t.exploration_noise_min is not None and bool(starting.any()):
-            draw = torch.rand(self.env.B, generator=self.gen, device=self.device)
-            self.noise_u = torch.where(starting, draw, self.noise_u)
 
     def _explored_designs(self, obs: CellObs) -> torch.Tensor:
         """(B,) bool: the episodes whose design phase is explored (`design_exploration_episodes`).
@@ -138,7 +142,6 @@ class TD3Run:
         """Train until the budget is spent; returns True if ``should_stop`` ended it early."""
         total = self.t.total_env_steps if budget is None else budget
         B = self.env.B
-        N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
         progress_every = max(B, total // 200)
         next_progress = (self.env_steps // progress_every + 1) * progress_every
         # Steps come in batches of B; a batch that would overrun the budget is not taken.
@@ -146,28 +149,7 @@ class TD3Run:
             if should_stop():
                 on_checkpoint(self.state_dict())
                 return True
-            obs_c = self.env.compact()
-            obs = observe_compact(obs_c, N, D, rl)
-            action = self._act(obs)
-            st = self.env.step(action)
-            self.buffer.add(
-                {
-                    **obs_c.as_dict("obs_"),
-                    **st.next_state.as_dict("next_"),
-                    "action": action,
-                    "reward": st.reward,
-                    "terminal": st.terminal,
-                    "done": st.done,
-                }
-            )
-            self.recent.extend(st.finished)
-            self._draw_noise(st.done)
-            self.env_steps += B
-            if self.env_steps >= self.t.learning_starts and self.buffer.size >= self.t.batch_size:
-                self.update_credit += B / self.t.train_frequency
-                while self.update_credit >= 1.0:
-                    self.update_credit -= 1.0
-                    self._update()
+            self.recent.extend(self.step().finished)
             point = None
             last = self.env_steps + B > total
             if self.env_steps >= self.next_eval or last:
@@ -183,18 +165,33 @@ class TD3Run:
             on_progress(self.progress(total, self.evaluate_now()))
         return False
 
-    def _update(self) -> None:
-        discount = None
-        if self.t.n_step > 1:
-            b, discount = self.buffer.sample_n_step(
-                self.t.batch_size, self.t.n_step, self.env.B, self.t.gamma, self.gen
-            )
-        else:
-            b = self.buffer.sample(self.t.batch_size, self.gen)
+    def step(self) -> EnvStep:
+        """One batch of B env steps with exploration, into the replay, and the updates they earn
+        (`train_frequency`, from `learning_starts`)."""
         N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
-        if self.t.hold_cone_start_deg is not None:
-            m = self.spec.mission
-            b["reward"] = relabel_rows(b, D, m, self.t.hold_cone_deg(self.env_steps, m.tolerance_deg))
+        obs_c = self.env.compact()
+        action = self._act(observe_compact(obs_c, N, D, rl))
+        st = self.env.step(action)
+        self.buffer.add(
+            {
+                **obs_c.as_dict("obs_"),
+                **st.next_state.as_dict("next_"),
+                "action": action,
+                "reward": st.reward,
+                "terminal": st.terminal,
+            }
+        )
+        self.env_steps += self.env.B
+        if self.env_steps >= self.t.learning_starts and self.buffer.size >= self.t.batch_size:
+            self.update_credit += self.env.B / self.t.train_frequency
+            while self.update_credit >= 1.0:
+                self.update_credit -= 1.0
+                self._update()
+        return st
+
+    def _update(self) -> None:
+        b = self.buffer.sample(self.t.batch_size, self.gen)
+        N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
         # One feature pass over both halves of the transitions (half the small ops of two).
         pair = {k: torch.cat((b["obs_" + k], b["next_" + k])) for k in Compact.FIELDS}
         both = observe_compact(Compact.from_dict(pair), N, D, rl)
@@ -204,8 +201,7 @@ class TD3Run:
         # While the design layers are held the controller learns to fly the design the policy
         # starts from (and the explored ones near it) before the design moves.
         actor_rows = None if self.design_released() else ~obs.design
-        self.agent.schedule(self.t, self.env_steps)
-        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, discount, actor_rows)
+        self.last_info = self.agent.update(obs, action, b["reward"], nxt, b["terminal"], self.gen, actor_rows)
 
     @property
     def updates(self) -> int:
@@ -275,7 +271,6 @@ class TD3Run:
             "cpu_gen": self.cpu_gen.get_state(),
             "rng": self.rng.bit_generator.state,
             "explore_design": self.explore_design.cpu().clone(),
-            "noise_u": self.noise_u.cpu().clone(),
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -295,6 +290,6 @@ class TD3Run:
         self.gen.set_state(d["gen"])
         self.cpu_gen.set_state(d["cpu_gen"])
         self.rng.bit_generator.state = d["rng"]
+        # Checkpoints of the removed `exploration_noise_min` hold each episode's noise draw,
+        # "noise_u": not read (a run that set the key does not load, docs/lab/2026-12-05-unused-knobs-removed.md).
         self.explore_design.copy_(d["explore_design"])
-        if "noise_u" in d:  # checkpoints from before `exploration_noise_min` have none
-            self.noise_u.copy_(d["noise_u"])

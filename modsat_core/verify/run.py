@@ -27,7 +27,7 @@ Basilisk is optional (``pip install -e '.[basilisk]'``) and imported only when f
 
 from __future__ import annotations
 
-import os
+import io
 import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from modsat_core.artefacts import DesignReport
+from modsat_core.evaluation.run_folder import RunFolder
 from modsat_core.grid import ACTUATOR, is_valid
 from modsat_core.sim import dynamics as dyn
 from modsat_core.sim.mission import EpisodeDraw
@@ -75,34 +75,27 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Run:
-    """What verification needs from a run directory."""
+    """What verification needs from a run folder."""
 
     spec: JobSpec
     grid: np.ndarray
     policy: torch.jit.ScriptModule | None
     policy_missing: str | None  # why there is no policy to fly, if there is none
 
-
-def load_run(run_dir: str) -> Run:
-    """Read ``spec.json``, ``design.json`` and (if present) ``policy_export.pt``."""
-    with open(os.path.join(run_dir, "spec.json"), "rb") as fh:
-        spec = parse_spec(fh.read())
-    with open(os.path.join(run_dir, "design.json"), "rb") as fh:
-        grid = DesignReport.parse(fh.read(), f"{run_dir}/design.json").array
-    if not is_valid(grid):
-        raise ValueError(f"the design in {run_dir}/design.json is not a valid satellite: nothing to fly")
-    path = os.path.join(run_dir, "policy_export.pt")
-    if not os.path.exists(path):
-        return Run(
-            spec,
-            grid,
-            None,
-            f"no policy_export.pt in {run_dir} (a GA run or an older run): only the PD baseline is verified",
-        )
-    with warnings.catch_warnings():  # TorchScript's deprecation notice (see policy.export_torchscript)
-        warnings.simplefilter("ignore", DeprecationWarning)
-        policy = torch.jit.load(path, map_location="cpu")
-    return Run(spec, grid, policy.eval(), None)
+    @classmethod
+    def of(cls, run: RunFolder) -> Run:
+        """``spec.json``, ``design.json`` and (if present) ``policy_export.pt``."""
+        spec, grid = run.spec(), run.design().array
+        if not is_valid(grid):
+            raise ValueError(f"the design in {run.path}/design.json is not a valid satellite: nothing to fly")
+        exported = run.read_optional("policy_export.pt")
+        if exported is None:
+            why = f"no policy_export.pt in {run.path} (a GA run or an older run): only the PD baseline is verified"
+            return cls(spec, grid, None, why)
+        with warnings.catch_warnings():  # TorchScript's deprecation notice (see policy.export_torchscript)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            policy = torch.jit.load(io.BytesIO(exported), map_location="cpu")
+        return cls(spec, grid, policy.eval(), None)
 
 
 class ExportedPolicy:
@@ -202,15 +195,16 @@ def plant_report(spec: JobSpec, grid: np.ndarray, wheels: WheelOptions) -> dict:
 
 
 def verify_run(
-    run_dir: str,
+    run_dir: str | RunFolder,
     episodes: int | None = None,
     wheels: WheelOptions | None = None,
     log: Callable[[str], None] | None = None,
 ) -> dict:
-    """Fly the run's evaluation slews in Basilisk and in modsat; the report ``--json`` prints."""
+    """Fly the run's evaluation slews in Basilisk and in modsat; the report ``--json`` prints.
+    ``run_dir``: the run's directory, or its files (:class:`RunFolder`)."""
     wheels = wheels or WheelOptions()
     log = log or (lambda _line: None)
-    run = load_run(run_dir)
+    run = Run.of(run_dir if isinstance(run_dir, RunFolder) else RunFolder(run_dir))
     spec = run.spec
     if spec.modules.actuator_model != "reaction-wheel" and wheels != WheelOptions():
         raise ValueError("the run's actuator model is ideal-torque: there are no wheels for the wheel options")
@@ -277,7 +271,6 @@ def add_verification(files: dict[str, bytes]) -> bool:
     installed, ``{"available": false, "reason": ...}``. The training itself never fails
     because of it: an error becomes the report's reason. Returns whether it was asked for."""
     import json
-    import tempfile
 
     spec = parse_spec(files["spec.json"])
     if not spec.evaluation.basilisk:
@@ -286,12 +279,7 @@ def add_verification(files: dict[str, bytes]) -> bool:
         report: dict = {"available": False, "reason": BASILISK_MISSING + " (on the machine that trained this run)"}
     else:
         try:
-            with tempfile.TemporaryDirectory(prefix="modsat-verify-") as tmp:
-                for name in ("spec.json", "design.json", "policy_export.pt"):
-                    if name in files:
-                        with open(os.path.join(tmp, name), "wb") as fh:
-                            fh.write(files[name])
-                report = {"available": True, **verify_run(tmp)}
+            report = {"available": True, **verify_run(RunFolder("the run's files", files))}
         except Exception as exc:  # the run's own results must still be stored
             report = {"available": False, "reason": f"verification failed: {type(exc).__name__}: {exc}"}
     files[ARTIFACT_NAME] = json.dumps(report, indent=1).encode()

@@ -22,8 +22,8 @@ ALLOWED = {
     "worker": {"modsat_core", "web"},
     "server": {"modsat_core", "web", "worker"},
 }
-#: The modsat_core modules web may use: torch-free data types.
-WEB_MAY_USE = {"modsat_core.grid", "modsat_core.artefacts"}
+#: The modsat_core modules web may use: torch-free data types, and the run-folder reader on them.
+WEB_MAY_USE = {"modsat_core.grid", "modsat_core.artefacts", "modsat_core.evaluation.run_folder"}
 #: modsat_core's own packages, bottom up: each may import the ones before it (and the torch-free
 #: top-level modules, `grid` and `artefacts`), never one after it.
 CORE_LAYERS = ("spec", "sim", "codesign", "agent", "evaluation", "training", "verify", "bench")

@@ -26,7 +26,7 @@ def test_constants_agree_with_the_code():
     from modsat_core.training.checkpoint import replay_buffer_bytes
 
     assert limits.N_FEATURES == N_FEATURES and limits.SET_CELL_WIDTH == SET_CELL_WIDTH
-    for n in (2, 3, 5, 10):
+    for n in (2, 3, 5, 10):  # the buffer is built from the same table: this checks the dtypes' sizes
         assert limits.transition_bytes(n) * 1000 == replay_buffer_bytes(n, 1000)
 
 

@@ -9,13 +9,13 @@ from modsat_core.grid import (
     STRUCTURE,
     is_connected,
     is_valid,
+    valid_mask,
     validity_problem,
 )
 from modsat_core.sim.morphology import (
     mass_properties,
     mass_properties_batched,
     seed_component_batched,
-    valid_mask_batched,
 )
 
 A, M = 0.1, 1.0
@@ -134,9 +134,10 @@ def test_batched_matches_single_design_functions():
     grids = rng.choice([0, 0, 1, 2], size=(200, 3, 3, 3))
     grids[:50] = np.where(rng.random((50, 3, 3, 3)) < 0.8, 1, 0)
     grids[:50, 1, 1, 1] = 2
-    valid = valid_mask_batched(torch.tensor(grids)).numpy()
+    valid = valid_mask(torch.tensor(grids)).numpy()  # the learning code's batched check, on tensors
     assert valid.any() and not valid.all()
     assert valid.tolist() == [is_valid(g) for g in grids]
+    assert valid.tolist() == valid_mask(grids).tolist()  # the same function on numpy arrays
     mass, com, inertia = mass_properties_batched(torch.tensor(grids), M, A)
     for i, g in enumerate(grids):
         if (g > 0).any():
@@ -152,7 +153,7 @@ def test_repair_keeps_the_seed_component_and_makes_every_design_valid(n):
     grids = torch.tensor(rng.integers(0, 3, size=(300, n, n, n)))
     grids[:20] = 0  # empty grids become the seed module alone
     fixed = seed_component_batched(grids)
-    assert valid_mask_batched(fixed).all()
+    assert valid_mask(fixed).all()
     c = n // 2
     assert (fixed[:, c, c, c] == ACTUATOR).all()
     assert ((fixed == 0) | (fixed == grids) | (torch.arange(n**3).reshape(n, n, n) == (c * n + c) * n + c)).all()

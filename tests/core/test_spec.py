@@ -1,12 +1,15 @@
 """JobSpec: bounds, unknown keys and readable error messages."""
 
 import json
+from pathlib import Path
 
 import pytest
-from pydantic import ValidationError
 
 from modsat_core.spec.jobspec import JobSpec, SpecError, Training, parse_spec
 from modsat_core.spec.presets import PRESETS, get_preset
+from modsat_core.spec.training import REMOVED_KEYS
+
+DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 
 def messages(data) -> list[str]:
@@ -148,14 +151,42 @@ def test_docs_spec_md_is_generated_from_the_current_schema():
 
 
 def test_exploration_noise_schedule():
-    """Constant without a final value; linear from learning_starts to the budget's end, or over
-    `exploration_noise_decay_steps` and then held."""
+    """Constant without a final value; linear from learning_starts to the budget's end."""
     t = Training(total_env_steps=10_000, learning_starts=2_000, exploration_noise=0.1)
     assert t.noise_at(0) == t.noise_at(9_000) == 0.1
     t = t.model_copy(update={"exploration_noise_final": 0.0})
     assert [t.noise_at(s) for s in (0, 2_000, 6_000, 10_000, 20_000)] == pytest.approx([0.1, 0.1, 0.05, 0.0, 0.0])
-    t = t.model_copy(update={"exploration_noise_decay_steps": 4_000})
-    assert [t.noise_at(s) for s in (2_000, 4_000, 6_000, 9_000)] == pytest.approx([0.1, 0.05, 0.0, 0.0])
     assert t.design_exploration_at(6_000) == t.design_exploration  # design exploration keeps its own schedule
-    with pytest.raises(ValidationError, match="exploration_noise_decay_steps"):
-        Training(exploration_noise_decay_steps=0)
+
+
+def test_a_removed_training_key_at_its_no_op_value_loads_and_is_dropped():
+    """Every saved run's spec.json lists every key of its day: the removed ones at their no-op
+    values load (the 3x3x3 reproduction's spec is one)."""
+    saved = json.loads((DOCS / "reproduction" / "3x3x3" / "spec.json").read_text())
+    assert {k: saved["training"][k] for k in REMOVED_KEYS} == REMOVED_KEYS
+    spec = parse_spec(saved)
+    assert not REMOVED_KEYS.keys() & spec.training.model_dump().keys()
+    assert spec == parse_spec(
+        {**saved, "training": {k: v for k, v in saved["training"].items() if k not in REMOVED_KEYS}}
+    )
+    assert Training.model_validate(REMOVED_KEYS) == Training()
+
+
+@pytest.mark.parametrize(
+    "key,value,shown",
+    [
+        ("n_step", 3, "it was 3 here); only its no-op value 1 is accepted"),
+        ("n_step", True, "it was true here); only its no-op value 1 is accepted"),
+        ("critic_layer_norm", True, "it was true here); only its no-op value false is accepted"),
+        ("exploration_noise_min", 0.001, "it was 0.001 here); only its no-op value null is accepted"),
+        ("policy_noise_final", 0.01, "it was 0.01 here); only its no-op value null is accepted"),
+    ],
+)
+def test_a_removed_training_key_set_to_anything_else_is_refused_by_name(key, value, shown):
+    with pytest.raises(SpecError) as info:
+        parse_spec({"training": {key: value}})
+    (msg,) = info.value.messages
+    assert msg.startswith(f"training.{key}: removed from modsat (") and shown in msg
+    assert "docs/lab/2026-12-05-unused-knobs-removed.md" in msg
+    (err,) = info.value.errors  # located at the key, as the API's 422 names it
+    assert err["loc"] == ("training", key) and err["type"] == "removed_field"

@@ -5,38 +5,80 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import torch
 
-from modsat_core.codesign.features import N_COMMON, N_DESIGN, PhysState, cell_observation
+from modsat_core.agent.flat_networks import FlatCellActor, FlatCellCritic, flat_observation
+from modsat_core.agent.policy import PolicyController
+from modsat_core.codesign.features import control_globals
+from modsat_core.grid import ACTUATOR
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.training.td3_control import flat_attitude, flat_state
+from modsat_core.training.td3_control import bench_control
+from modsat_core.training.td3_trainer import TD3Run
 from server.cli import main
 
+from .conftest import tiny_spec
 
-def test_flat_state_is_what_an_actuator_cell_sees(tiny):
-    """The diagnostic's input is the control part of the co-design features of the actuator cell."""
-    spec = tiny()
+
+def flat_state(sim: SlewSim) -> torch.Tensor:
+    """(B, 20 + 3K) the satellite's flat state read off the simulator: the control globals and
+    each wheel unit's momentum (what the flat networks must see in per-cell observations)."""
+    h = (sim.state.h_B / sim.h_scale_Nms).reshape(sim.B, -1)
+    glob = control_globals(sim.error_quaternion(), sim.state.omega_B, sim.mission.rate_limit_rad_s)
+    return torch.cat((glob, h), dim=-1).float()
+
+
+def _two_actuators() -> np.ndarray:
     grid = reference_design(2)
+    grid.reshape(-1)[2] = ACTUATOR  # and 7, the reference actuator
+    return grid
+
+
+def test_the_flat_networks_see_the_flat_state_and_act_on_the_actuator_cells(tiny):
+    spec = tiny()
+    grid = _two_actuators()
     sim = SlewSim.from_designs([Design.from_grid(grid, spec.modules)] * 3, spec.mission, spec.modules)
     sim.reset(
         [0, 1, 2],
         [draw_episode(np.random.default_rng(i), spec.mission, {"omega_B": [0.1, -0.2, 0.05]}) for i in range(3)],
     )
-    sim.state.h_B[:] = torch.tensor([0.01, -0.02, 0.03])
-    cell = int(np.flatnonzero(grid.reshape(-1) == 2)[0])
-    h_cells = torch.zeros(3, 8, 3)
-    h_cells[:, cell] = sim.state.h_B[:, 0] / sim.h_scale_Nms
-    phys = PhysState(sim.state.q_BN, sim.q_TN, sim.state.omega_B, h_cells)
-    obs = cell_observation(
-        torch.as_tensor(grid).long().expand(3, 2, 2, 2), torch.full((3,), 3), 3, phys, spec.mission.rate_limit_rad_s
-    )
-    torch.testing.assert_close(flat_state(sim), obs.x[:, cell, N_COMMON + N_DESIGN :])
-    # and the attitude the tolerance curriculum recomputes rewards from is read back from it
-    q, omega = flat_attitude(flat_state(sim), spec.mission.rate_limit_rad_s)
-    torch.testing.assert_close(q, sim.error_quaternion().float())
-    torch.testing.assert_close(omega, sim.state.omega_B.float())
+    sim.state.h_B[:] = 0.01 * torch.randn(3, 2, 3, generator=torch.Generator().manual_seed(0))
+    obs = PolicyController(None, grid, spec).observation(sim)  # as the policy's Monte-Carlo sees it
+    cells = torch.as_tensor(np.flatnonzero(grid.reshape(-1) == ACTUATOR))
+    torch.testing.assert_close(flat_observation(obs, cells), flat_state(sim))
+    actor, critic = FlatCellActor(grid, [8, 8]), FlatCellCritic(grid, [8, 8])
+    a = actor(obs)
+    assert a.shape == (3, 8, 3) and not a[:, [c for c in range(8) if c not in cells.tolist()]].any()
+    torch.testing.assert_close(a[:, cells], actor.mlp(flat_state(sim)).reshape(3, 2, 3))
+    q1, q2 = critic(obs, a)
+    ref1, ref2 = critic.mlp(flat_state(sim), a[:, cells].reshape(3, 6))
+    torch.testing.assert_close((q1, q2), (ref1, ref2))
+
+
+def test_the_trainer_trains_the_flat_networks_on_a_fixed_design():
+    spec = tiny_spec(training__total_env_steps=400)
+    with pytest.raises(ValueError, match="fixed design"):
+        TD3Run(spec, flat=True)
+    run = TD3Run(spec, fixed_grid=_two_actuators(), flat=True)
+    assert isinstance(run.agent.actor, FlatCellActor) and isinstance(run.agent.critic, FlatCellCritic)
+    before = [p.clone() for p in run.agent.actor.parameters()]
+    while run.env_steps + run.env.B <= spec.training.total_env_steps:
+        run.step()
+    assert run.env_steps == 400 and run.agent.updates > 0 and run.buffer.size == 400
+    assert any(not torch.equal(b, p) for b, p in zip(before, run.agent.actor.parameters()))
+
+
+def test_bench_control_can_fly_the_target_actor():
+    report = bench_control(tiny_spec(training__total_env_steps=400), eval_every=200, eval_target=True)
+    assert [p["env_steps"] for p in report["curve"]] == [200, 400]
+    for p in report["curve"]:
+        assert set(p["target"]) <= set(p) and 0.0 <= p["target"]["success_rate"] <= 1.0
+    # the target actor is a different network from the actor (a Polyak average), so its flights differ
+    assert any(p["target"]["mean_return"] != p["mean_return"] for p in report["curve"])
+    plain = bench_control(tiny_spec(training__total_env_steps=400), eval_every=200)
+    assert "target" not in plain["curve"][0]
 
 
 def test_cli_bench_control_trains_evaluates_and_compares_with_pd(tiny, tmp_path, capsys):

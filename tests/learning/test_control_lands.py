@@ -10,6 +10,11 @@ lands 0, 3, 34, 88, 88, 94, 97 and 100 % of 32 slews at 5k-40k; seeds 1 and 2 re
 94 % and end at 78 and 88 %. Without the penalty seed 0 ends at 12.5 % (its best) on one
 thread: the hold chatters through the rate tolerance. The untrained controller lands none,
 so 75 % over 32 slews, reached and held at the end, cannot come by chance.
+
+Those runs were made by `bench control`'s own TD3 loop, before it trained through the co-design
+trainer (TD3Run with the flat networks: the replay stores compact states and float16 actions,
+and the random draws differ), so the seeded run this test replays is another draw of the same
+recipe until it is measured again on the AMD machine.
 """
 
 from __future__ import annotations

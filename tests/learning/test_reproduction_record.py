@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from modsat_core.evaluation.study_report import load_run, study, table_markdown
+from modsat_core.evaluation.run_folder import RunFolder
+from modsat_core.evaluation.study_report import saved_run, study, table_markdown
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
@@ -16,7 +17,7 @@ DOCS = Path(__file__).resolve().parents[2] / "docs"
 @pytest.mark.parametrize(("grid", "seeds"), [("3x3x3", 3), ("5x5x5", 3)])
 def test_the_reproduction_table_is_the_report_of_the_kept_runs(grid, seeds):
     root = DOCS / "reproduction" / grid
-    runs = [load_run(str(p)) for p in sorted((root / "runs").iterdir())]
+    runs = [saved_run(RunFolder(p)) for p in sorted((root / "runs").iterdir())]
     result = study(runs)
     assert {label: a["finished"] for label, a in result["algorithms"].items()} == {"RL co-design": seeds, "GA": seeds}
     table = table_markdown(result)

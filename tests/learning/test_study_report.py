@@ -12,7 +12,8 @@ import pytest
 
 from modsat_core.artefacts import ArtefactError, DesignReport
 from modsat_core.evaluation.run_files import design_report
-from modsat_core.evaluation.study_report import held_curves, load_run, symmetry
+from modsat_core.evaluation.run_folder import RunFolder
+from modsat_core.evaluation.study_report import held_curves, saved_run, symmetry
 from modsat_core.grid import ACTUATOR, STRUCTURE
 
 from .conftest import tiny_spec
@@ -117,7 +118,7 @@ def test_report_refuses_what_is_not_one_study(runs, tmp_path):
     assert r.returncode == 2 and "no curve.json" in r.stderr and "Traceback" not in r.stderr
     (other / "curve.json").write_text("{not json")
     with pytest.raises(ArtefactError, match=r"curve\.json"):
-        load_run(str(other))
+        saved_run(RunFolder(other))
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
 
 
@@ -149,7 +150,7 @@ def test_symmetry_numbers():
 
 
 def test_held_curves_wait_for_every_seed(runs):
-    a, b = load_run(str(runs[("ga", 0)])), load_run(str(runs[("ga", 1)]))
+    a, b = saved_run(RunFolder(runs[("ga", 0)])), saved_run(RunFolder(runs[("ga", 1)]))
     c = held_curves([a, b], "mean_return")
     first = max(a.curve.points[0].env_steps, b.curve.points[0].env_steps)
     assert c["env_steps"][0] == first and c["env_steps"] == sorted(set(c["env_steps"]))

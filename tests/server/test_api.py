@@ -65,6 +65,19 @@ def test_invalid_spec_is_422_naming_the_field(api, body, field, words):
     assert all(e["loc"][0] == "body" for e in r.json()["detail"])
 
 
+def test_a_removed_training_key_is_422_at_the_key_unless_it_holds_its_no_op_value(api):
+    old = {"preset": "quick-td3", "overrides": {"training": {"n_step": 3}}}
+    r = api.client.post("/api/jobs", json=old)
+    assert r.status_code == 422, r.text
+    (msg,) = r.json()["messages"]
+    assert msg.startswith("training.n_step: removed from modsat (it was 3 here)"), msg
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["body", "overrides", "training", "n_step"] and err["type"] == "removed_field"
+    # an old run's spec.json, which lists the key at its no-op value, is accepted
+    saved = {"preset": "quick-td3", "overrides": {"training": {"n_step": 1, "policy_noise_final": None}}}
+    assert api.client.post("/api/jobs", json=saved).status_code == 201
+
+
 @pytest.mark.parametrize("raw", [b"{", b"", b"\xff\xfe\x00", b"[" * 100_000 + b"]" * 100_000, b"1" * 5000])
 def test_unreadable_body_is_400(api, raw):
     r = api.client.post("/api/jobs", content=raw, headers={"content-type": "application/json"})

@@ -70,6 +70,18 @@ def test_side_by_side_placements_do_not_overlap():
     assert side_by_side_positions([2.0]) == [(0.0, 0.0, 0.0)]
 
 
+def test_the_viewer_opens_a_run_folder_without_its_optional_files(tmp_path):
+    files = _files()
+    for name in ("design.json", "trajectories.json"):  # an older run: no evaluation.json, no spec.json
+        (tmp_path / name).write_bytes(files[name])
+    run = RunData.from_dir(tmp_path)
+    assert run.title == tmp_path.name and run.evaluation is None and run.spec is None
+    assert len(run.episodes["policy"]) == 2 and run.modules == 3
+    (tmp_path / "trajectories.json").unlink()
+    with pytest.raises(ArtefactError, match=r"no trajectories\.json"):
+        RunData.from_dir(tmp_path)
+
+
 def test_run_data_reads_the_artefacts():
     files = _files()
     run = RunData.from_json(files["design.json"], files["trajectories.json"], spec=files["spec.json"])
