@@ -14,9 +14,9 @@ One code path for SQLite and PostgreSQL (the schema and the engine set-up are in
 from __future__ import annotations
 
 from .artifacts import CHECKPOINT_NAME, ArtifactQueries, content_type_for
-from .base import MAX_ID
+from .base import MAX_ID, Claim
 from .jobs import JobQueries
-from .queue import Beat, Claim, QueueProtocol
+from .queue import Beat, QueueProtocol
 from .studies import StudyQueries
 from .workers import WorkerQueries
 

@@ -5,15 +5,12 @@ from __future__ import annotations
 import hashlib
 import mimetypes
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from sqlalchemy import Connection, LargeBinary, delete, func, insert, select, update
 
 from ..db import artifacts, db_now, jobs
-from .base import StoreBase, valid_id
-
-if TYPE_CHECKING:
-    from .queue import Claim
+from .base import Claim, StoreBase, valid_id
 
 CHECKPOINT_NAME = "checkpoint.pt"
 _READ_CHUNK = 1 << 20

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 from sqlalchemy import Connection, literal, select
 from sqlalchemy.engine import make_url
@@ -72,3 +73,16 @@ class StoreBase:
     def ping(self) -> None:
         with self._read() as conn:
             conn.execute(select(literal(1))).scalar_one()
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A job held by one worker. ``attempt`` is the fencing token of every write."""
+
+    job_id: int
+    attempt: int
+    spec_json: str
+    checkpoint_env_steps: int | None
+    run_seconds: float
+    failures: int
+    max_attempts: int

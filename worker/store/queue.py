@@ -24,24 +24,11 @@ from modsat_core.artefacts import ProgressRecord
 from ..db import TERMINAL_STATUSES, artifacts, attempts, db_now, jobs, metrics
 from ..jsonsafe import to_json
 from .artifacts import CHECKPOINT_NAME, drop_checkpoint, put_artifact
-from .base import StoreBase
+from .base import Claim, StoreBase
 
 
 class _Fenced(Exception):
     """Raised inside a write transaction when the fencing token no longer matches."""
-
-
-@dataclass(frozen=True)
-class Claim:
-    """A job held by one worker. ``attempt`` is the fencing token of every write."""
-
-    job_id: int
-    attempt: int
-    spec_json: str
-    checkpoint_env_steps: int | None
-    run_seconds: float
-    failures: int
-    max_attempts: int
 
 
 @dataclass(frozen=True)
