@@ -540,7 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     bl2.add_argument(
         "--designs", nargs="+", default=["cube", "three-actuator"], help="designs (default cube three-actuator)"
     )
-    bl2.add_argument("--steps", type=int, help="diffsim env steps per run (default 240 updates: 1,966,080)")
+    bl2.add_argument("--steps", type=int, help="diffsim env steps per run (default 120 updates: 983,040)")
     bl2.add_argument("--no-td3", action="store_true", help="leave out the TD3 rows")
     bl2.add_argument("--out", help="also write the rows (JSON) to this file")
     bl2.set_defaults(func=_cmd_bench_learners, threads=None)
