@@ -99,7 +99,7 @@ def load_run(run_dir: str) -> Run:
             None,
             f"no policy_export.pt in {run_dir} (a GA run or an older run): only the PD baseline is verified",
         )
-    with warnings.catch_warnings():  # TorchScript's deprecation notice (see policy.export_torchscript)
+    with warnings.catch_warnings():  # TorchScript's deprecation notice (see agent.export.export_torchscript)
         warnings.simplefilter("ignore", DeprecationWarning)
         policy = torch.jit.load(path, map_location="cpu")
     return Run(spec, grid, policy.eval(), None)
