@@ -311,8 +311,10 @@ _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
 
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactInfo], responses=_ERRORS)
 def list_artifacts(job_id: JobId, store: StoreDep) -> list[ArtifactInfo]:
-    """Files of the job: outputs of a finished run (policy, export, design, evaluation,
-    trajectories, curve, the `.viser` 3D recording) and, while it runs, its latest checkpoint."""
+    """Files of the job: outputs of a finished run (policy, the standalone controller as
+    TorchScript `policy_export.pt`, torch.export `policy_export.pt2` and ONNX `policy_export.onnx`
+    (docs/export.md), design, evaluation, trajectories, curve, the `.viser` 3D recording) and,
+    while it runs, its latest checkpoint."""
     if store.job_state(job_id) is None:
         raise _unknown(job_id)
     return [artifact_info(job_id, r) for r in store.list_artifacts(job_id)]

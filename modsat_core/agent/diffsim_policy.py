@@ -179,6 +179,9 @@ class ExportedDiffsimController(nn.Module):
         self.omega_lim = 0.0 if pd is None else float(pd.omega_lim_rad_s)
 
     def forward(self, q_BT: Tensor, omega_B: Tensor, h_B: Tensor) -> Tensor:
+        # q and -q are one attitude: the PD law takes the representative the simulator passes
+        # (w >= 0), so that it turns the short way whatever sign the caller gives.
+        q_BT = q_BT * torch.where(q_BT[:, :1] < 0, -1.0, 1.0)
         box = torch.full((q_BT.shape[0], 1), self.K * self.tau_max, dtype=q_BT.dtype)
         h_tot = h_B.sum(dim=1)
         x = diffsim_inputs(q_BT, omega_B, h_tot, self.rate_limit, box).float()

@@ -24,8 +24,10 @@ per-cell observations of :mod:`modsat_core.codesign.features`:
 Plain MLP pairs for flat observations (gymnasium tasks, ``bench control``) are in
 :mod:`modsat_core.agent.flat_networks`; the layers both use in :mod:`modsat_core.agent.layers`.
 
-Every actor has ``act(x, act_mask, value_mask, design)`` over plain tensors (TorchScript
-can compile it, which the standalone export uses) and ``forward(obs: CellObs)``.
+Every actor has ``act(x, act_mask, value_mask, design)`` over plain tensors,
+``control_on(x, value_mask, cells)``, the control actions of a fixed set of cells with no
+data-dependent branch or shape (what the standalone exports run: TorchScript, torch.export,
+ONNX; docs/export.md), and ``forward(obs: CellObs)``.
 """
 
 from __future__ import annotations
@@ -67,6 +69,16 @@ class CellActor(nn.Module):
             control = 0.5 * (control - self.control_head(self.trunk(mirror_control(x))))
         raw = torch.where(design.reshape(-1, 1, 1), self.design_head(z), control)
         return torch.tanh(raw) * act_mask.unsqueeze(-1).to(raw.dtype)
+
+    def control_on(self, x: Tensor, value_mask: Tensor, cells: Tensor) -> Tensor:
+        """(B, K, 3) the control actions of the cells ``cells`` (K,) of satellites that all fly:
+        :meth:`act` without its data-dependent branches, for the export (``value_mask``: unused,
+        the set actor's signature)."""
+        xc = x[:, cells]
+        control = self.control_head(self.trunk(xc))
+        if self.odd_control:
+            control = 0.5 * (control - self.control_head(self.trunk(mirror_control(xc))))
+        return torch.tanh(control)
 
     @torch.jit.unused  # the export compiles ``act``; CellObs is no TorchScript type
     def forward(self, obs: CellObs) -> Tensor:
@@ -131,12 +143,27 @@ class _SetActorPhase(nn.Module):
         self.head = _CellHead(cell_width, hidden[-1])
         self.odd = odd
 
-    def _out(self, x: Tensor, value_mask: Tensor, rows: Tensor, cells: Tensor) -> Tensor:
+    def _encode(self, x: Tensor, value_mask: Tensor) -> tuple[Tensor, Tensor]:
+        """Every cell's encoding (B, C, cell_width) and its satellite's ``head.sat`` output (B, cell_width)."""
         enc = self.encoder(x)
         # The satellite-wide features (state, counts, progress) are the same on every
         # occupied cell; their mean over the satellite is them.
         z = self.wide(torch.cat((masked_mean(enc, value_mask), masked_mean(x, value_mask)), dim=-1))
-        return self.head(enc[rows, cells], self.head.sat(z)[rows])
+        return enc, self.head.sat(z)
+
+    def _out(self, x: Tensor, value_mask: Tensor, rows: Tensor, cells: Tensor) -> Tensor:
+        enc, sat = self._encode(x, value_mask)
+        return self.head(enc[rows, cells], sat[rows])
+
+    def on_cells(self, x: Tensor, value_mask: Tensor, cells: Tensor) -> Tensor:
+        """(B, K, 3) :meth:`forward`'s actions of the cells ``cells`` (K,) of every satellite: the
+        same acting cells in every row, so no shape depends on the data (the export)."""
+        enc, sat = self._encode(x, value_mask)
+        out = self.head(enc[:, cells], sat.unsqueeze(1))
+        if self.odd:
+            enc_m, sat_m = self._encode(mirror_control(x), value_mask)
+            out = 0.5 * (out - self.head(enc_m[:, cells], sat_m.unsqueeze(1)))
+        return torch.tanh(out)
 
     def forward(self, x: Tensor, act_mask: Tensor, value_mask: Tensor) -> Tensor:
         idx = act_mask.nonzero()
@@ -181,6 +208,11 @@ class SetActor(nn.Module):
         raw[design] = self.design(x[design], act_mask[design], value_mask[design])
         raw[fly] = self.control(x[fly], act_mask[fly], value_mask[fly])
         return raw
+
+    def control_on(self, x: Tensor, value_mask: Tensor, cells: Tensor) -> Tensor:
+        """(B, K, 3) the control actions of the cells ``cells`` (K,) of satellites that all fly
+        (:meth:`act` without its data-dependent branches, for the export)."""
+        return self.control.on_cells(x, value_mask, cells)
 
     @torch.jit.unused
     def forward(self, obs: CellObs) -> Tensor:

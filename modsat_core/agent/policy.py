@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import io
-import warnings
 from collections.abc import Callable
 from typing import TYPE_CHECKING, cast
 
@@ -76,14 +74,14 @@ class ExportedController(nn.Module):
 
     ``forward(q_BT, omega_B, h_B)``: error quaternion (B, 4) wxyz, body rate (B, 3) rad/s,
     per-wheel-unit momentum (B, K, 3) N m s -> per-unit body torque command (B, K, 3) N m.
-    The design's constant per-cell features are baked in as buffers.
+    The design's constant per-cell features are baked in as buffers. No branch or shape depends
+    on the data, so torch.export and ONNX capture it whole (docs/export.md).
     """
 
     if TYPE_CHECKING:  # the buffers' types, for mypy only: TorchScript cannot read string annotations
         base_x: Tensor
         occupied: Tensor
         act_cells: Tensor
-        act_mask: Tensor
         value_mask: Tensor
 
     def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
@@ -100,7 +98,6 @@ class ExportedController(nn.Module):
         self.register_buffer("base_x", base.x[0].clone())
         self.register_buffer("occupied", (ctrl.grid.reshape(-1) != 0).float().unsqueeze(-1))
         self.register_buffer("act_cells", ctrl.act_cells.clone())
-        self.register_buffer("act_mask", (ctrl.grid.reshape(-1) == ACTUATOR).unsqueeze(0))
         self.register_buffer("value_mask", (ctrl.grid.reshape(-1) != 0).unsqueeze(0))
         self.c0 = CONTROL_AT
         self.n_glob = N_CONTROL_GLOBAL
@@ -121,9 +118,8 @@ class ExportedController(nn.Module):
         g0, g1 = self.c0, self.c0 + self.n_glob
         x[:, :, g0:g1] = glob.unsqueeze(1).to(x.dtype) * self.occupied
         x[:, :, g1 : g1 + 3] = h_cells * self.occupied
-        design = torch.zeros(B, dtype=torch.bool)
-        a = self.actor.act(x, self.act_mask.expand(B, C), self.value_mask.expand(B, C), design)
-        return a[:, self.act_cells] * self.tau_max
+        a = self.actor.control_on(x, self.value_mask.expand(B, C), self.act_cells)
+        return a * self.tau_max
 
 
 def controller_for(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> Callable[[SlewSim], Tensor]:
@@ -143,15 +139,3 @@ def exported(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> nn.Module:
             actor, grid, spec.mission.rate_limit_rad_s, spec.modules.torque_scale_Nm, sim.plant.I_B[0], pd
         )
     return ExportedController(actor, grid, spec)
-
-
-def export_torchscript(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> bytes:
-    """TorchScript bytes of :func:`exported` (load with ``torch.jit.load``)."""
-    with warnings.catch_warnings():
-        # TorchScript is deprecated in favour of torch.export but still the format that
-        # loads with one call (torch.jit.load) in any torch since 1.x; see docs/learning.md.
-        warnings.simplefilter("ignore", DeprecationWarning)
-        module = torch.jit.script(exported(actor, grid, spec).eval())
-        buf = io.BytesIO()
-        torch.jit.save(module, buf)
-    return buf.getvalue()

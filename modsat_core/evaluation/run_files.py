@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from modsat_core.agent.policy import controller_for, export_torchscript
+from modsat_core.agent.export import export_files
+from modsat_core.agent.policy import controller_for
 from modsat_core.agent.policy_file import policy_bytes
 from modsat_core.artefacts import CurveFile, CurvePoint, DesignReport, EvaluationReport, RunSummary, Trajectories
 from modsat_core.codesign.mdp import effective_invalid_penalty
@@ -179,7 +180,7 @@ def run_files(
         "policy.pt": policy_bytes(actor, grid, spec),
     }
     if ev.design_valid:
-        files["policy_export.pt"] = export_torchscript(actor, grid, spec)
+        files.update(export_files(actor, grid, spec))
     return files, run_summary(ev, design).to_dict()
 
 

@@ -92,7 +92,7 @@ class Run:
         if exported is None:
             why = f"no policy_export.pt in {run.path} (a GA run or an older run): only the PD baseline is verified"
             return cls(spec, grid, None, why)
-        with warnings.catch_warnings():  # TorchScript's deprecation notice (see policy.export_torchscript)
+        with warnings.catch_warnings():  # TorchScript's deprecation notice (see agent.export.export_torchscript)
             warnings.simplefilter("ignore", DeprecationWarning)
             policy = torch.jit.load(io.BytesIO(exported), map_location="cpu")
         return cls(spec, grid, policy.eval(), None)

@@ -156,7 +156,8 @@ def test_a_run_writes_every_output_and_its_policy_file_reads_back(base):
     result = train(spec, on_progress=progress.append)
     files = result.artifacts()
     assert not result.stopped and result.env_steps == 6 * 32
-    assert {"spec.json", "curve.json", "evaluation.json", "policy.pt", "policy_export.pt"} <= set(files)
+    exports = {"policy_export.pt", "policy_export.pt2", "policy_export.onnx"}  # tests/learning/test_export.py
+    assert {"spec.json", "curve.json", "evaluation.json", "policy.pt", *exports} <= set(files)
     curve = json.loads(files["curve.json"])
     assert curve["algorithm"] == "diffsim-control"
     assert [p["env_steps"] for p in curve["points"]] == [64, 128, 192]

@@ -42,6 +42,8 @@ OUTPUTS = {
     "trajectories.json",
     "policy.pt",
     "policy_export.pt",
+    "policy_export.pt2",
+    "policy_export.onnx",
     "evaluation.viser",
 }
 
@@ -128,6 +130,9 @@ def test_quick_preset_over_http(start_server, sqlite_url, spawn_worker):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # torch.jit is deprecated, still the export format
         assert torch.jit.load(io.BytesIO(exported)) is not None
+    for name in ("policy_export.pt2", "policy_export.onnx"):  # docs/export.md
+        r = s.client.get(f"/api/jobs/{job_id}/artifacts/{name}")
+        assert r.status_code == 200 and r.headers["content-type"] == "application/octet-stream" and r.content
     assert s.client.get(f"/api/jobs/{job_id}/artifacts/curve.png").content.startswith(b"\x89PNG")
     design = s.client.get(f"/api/jobs/{job_id}/artifacts/design.json").json()
     assert design["grid_size"] == 3

@@ -194,6 +194,21 @@ def test_large_artifact_round_trip_in_chunks(store):
     assert store.artifact_info(job_id, "../policy.pt") is None
 
 
+def test_artifacts_are_served_with_their_content_type(store):
+    job_id = submit(store)
+    c = store.claim("w", lease_s=30)
+    names = ["curve.json", "policy.pt", "policy_export.pt", "policy_export.pt2", "policy_export.onnx", "curve.png"]
+    assert store.complete(c, files=dict.fromkeys(names, b"x"), summary=None, env_steps=400, attempt_seconds=1)
+    types = {a["name"]: a["content_type"] for a in store.list_artifacts(job_id)}
+    assert types == {
+        "curve.json": "application/json",
+        "curve.png": "image/png",
+        **dict.fromkeys(
+            ["policy.pt", "policy_export.pt", "policy_export.pt2", "policy_export.onnx"], "application/octet-stream"
+        ),
+    }
+
+
 def test_list_filter_and_pagination(store):
     ids = [submit(store) for _ in range(7)]
     store.request_cancel(ids[0])

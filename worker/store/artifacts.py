@@ -19,7 +19,7 @@ _READ_CHUNK = 1 << 20
 def content_type_for(name: str) -> str:
     if name.endswith(".json"):
         return "application/json"
-    if name.endswith(".pt"):
+    if name.endswith((".pt", ".pt2", ".onnx")):  # torch files and ONNX: binary, whatever mime.types says
         return "application/octet-stream"
     return mimetypes.guess_type(name)[0] or "application/octet-stream"
 

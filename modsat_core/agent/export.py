@@ -1,0 +1,133 @@
+"""A trained policy's standalone controller in the formats other software loads (docs/export.md).
+
+Every run with a valid design writes the controller of :func:`~modsat_core.agent.policy.exported`,
+``forward(q_BT (B, 4), omega_B (B, 3), h_B (B, K, 3)) -> per-unit body torque command (B, K, 3)``,
+in three files:
+
+``policy_export.pt2``
+    A ``torch.export`` program (``torch.export.load(path).module()``), batch size dynamic.
+``policy_export.onnx``
+    The same program in ONNX (opset 20), for onnxruntime and flight software without torch.
+``policy_export.pt``
+    TorchScript (``torch.jit.load``), deprecated in torch 2.13 but kept: it is what runs from
+    before these formats carry, ``modsat verify`` reads, and any torch since 1.x loads.
+
+A format whose exporter fails (an exporter bug, a torch too old for it) is left out with a
+warning naming the format and why; the run's other files are written as ever.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from modsat_core.agent.policy import exported
+from modsat_core.grid import ACTUATOR
+from modsat_core.spec.jobspec import JobSpec
+
+log = logging.getLogger(__name__)
+
+#: The exported controller's inputs and output, by name (the ONNX graph's names too).
+INPUT_NAMES = ("q_BT", "omega_B", "h_B")
+OUTPUT_NAME = "tau_cmd_B"
+#: ONNX operator set of ``policy_export.onnx``.
+ONNX_OPSET = 20
+
+
+def export_torchscript(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> bytes:
+    """TorchScript bytes of :func:`exported` (load with ``torch.jit.load``)."""
+    with warnings.catch_warnings():
+        # TorchScript is deprecated in favour of torch.export but still the format that
+        # loads with one call (torch.jit.load) in any torch since 1.x; see docs/export.md.
+        warnings.simplefilter("ignore", DeprecationWarning)
+        module = torch.jit.script(exported(actor, grid, spec).eval())
+        buf = io.BytesIO()
+        torch.jit.save(module, buf)
+    return buf.getvalue()
+
+
+def example_inputs(n_wheels: int, batch: int = 2) -> tuple[Tensor, Tensor, Tensor]:
+    """Inputs of the exported controller (float32): a unit quaternion, a rate, wheel momenta.
+
+    ``batch`` >= 2: torch.export fixes a dimension whose example size is 1."""
+    gen = torch.Generator().manual_seed(0)
+    q = torch.nn.functional.normalize(torch.randn(batch, 4, generator=gen), dim=-1)
+    return q, 0.01 * torch.randn(batch, 3, generator=gen), 0.001 * torch.randn(batch, n_wheels, 3, generator=gen)
+
+
+def export_program(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> torch.export.ExportedProgram:
+    """:func:`exported` captured by ``torch.export`` for float32 inputs of any batch size."""
+    K = int((np.asarray(grid) == ACTUATOR).sum())
+    batch = torch.export.Dim.DYNAMIC
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # torch's own pytree deprecations
+        return torch.export.export(
+            exported(actor, grid, spec).eval(),
+            example_inputs(K),
+            dynamic_shapes={name: {0: batch} for name in INPUT_NAMES},
+        )
+
+
+def program_bytes(program: torch.export.ExportedProgram) -> bytes:
+    """``policy_export.pt2``: the program as ``torch.export.save`` writes it."""
+    buf = io.BytesIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        torch.export.save(program, buf)
+    return buf.getvalue()
+
+
+def onnx_bytes(program: torch.export.ExportedProgram) -> bytes:
+    """``policy_export.onnx``: the program translated by torch's exporter (needs ``onnxscript``)."""
+    onnx_logger = logging.getLogger("torch.onnx")
+    level = onnx_logger.level
+    onnx_logger.setLevel(logging.ERROR)  # it lists every optional operator library it skips (torchvision)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            onnx_program = torch.onnx.export(
+                program,
+                dynamo=True,
+                input_names=list(INPUT_NAMES),
+                output_names=[OUTPUT_NAME],
+                opset_version=ONNX_OPSET,
+                verbose=False,
+            )
+    finally:
+        onnx_logger.setLevel(level)
+    if onnx_program is None:  # only the legacy (TorchScript) exporter returns None
+        raise RuntimeError("torch.onnx.export returned no program")
+    return onnx_program.model_proto.SerializeToString()
+
+
+def export_files(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> dict[str, bytes]:
+    """The standalone controller's files of a run (the module docstring): those that could be
+    written. An exporter that fails is reported (a warning) and its file left out: a finished run
+    is never lost to an exporter (torch.export and the ONNX translation raise many kinds of errors)."""
+    files = {"policy_export.pt": export_torchscript(actor, grid, spec)}
+    try:
+        program = export_program(actor, grid, spec)
+    except Exception as exc:
+        _left_out("policy_export.pt2 and policy_export.onnx", exc)
+        return files
+    writers: dict[str, Callable[[torch.export.ExportedProgram], bytes]] = {
+        "policy_export.pt2": program_bytes,
+        "policy_export.onnx": onnx_bytes,
+    }
+    for name, write in writers.items():
+        try:
+            files[name] = write(program)
+        except Exception as exc:
+            _left_out(name, exc)
+    return files
+
+
+def _left_out(what: str, exc: Exception) -> None:
+    hint = " (install onnxscript: pip install onnx onnxscript)" if isinstance(exc, ImportError) else ""
+    log.warning("%s left out of the run's files: %s: %s%s", what, type(exc).__name__, exc, hint)
