@@ -285,9 +285,19 @@ class CurveFile(Record):
     points: list[CurvePoint]
     best_env_steps: int | None = Field(None, description="TD3: the point whose policy the final evaluation flies.")
     selection: list[dict[str, Any]] | None = Field(
-        None, description="TD3 with `training.select_top_k` > 1: each candidate's figures on the validation slews."
+        None,
+        description=(
+            "TD3 with `training.select_top_k` > 1: each candidate's figures on the validation slews. "
+            "diffsim-codesign: each candidate design's objective there."
+        ),
     )
-    designs: list[dict[str, Any]] | None = Field(None, description="GA: every evaluated design, in order.")
+    designs: list[dict[str, Any]] | None = Field(
+        None,
+        description=(
+            "GA: every evaluated design, in order. diffsim-codesign: each design update (the "
+            "distribution's mode, its draws' objective)."
+        ),
+    )
     generations: list[dict[str, Any]] | None = Field(None, description="GA: the survivor schedule.")
 
 

@@ -119,6 +119,23 @@ def _cmd_bench_designs(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_codesign(args: argparse.Namespace) -> int:
+    _set_threads(None)
+    from modsat_core.bench.codesign import bench_codesign
+    from modsat_core.spec.presets import get_preset
+
+    get_preset(args.preset)  # an unknown preset is a readable error before any training
+    for name in ("designs", "slews"):
+        if getattr(args, name) < 1:
+            raise SystemExit(f"modsat bench codesign: --{name} must be at least 1")
+    if args.out:
+        if os.path.isdir(args.out):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    _print_report(bench_codesign(args.preset, args.seed, args.designs, args.slews), args.out)
+    return 0
+
+
 def _cmd_bench_learners(args: argparse.Namespace) -> int:
     _set_threads(None)
     from modsat_core.bench.learners import DESIGNS, DIFFSIM_STEPS, bench_learners
@@ -557,6 +574,17 @@ def build_parser() -> argparse.ArgumentParser:
     bd.add_argument("--slews", type=int, default=32, help="slews per held-out design (default 32)")
     bd.add_argument("--out", help="also write the JSON report to this file")
     bd.set_defaults(func=_cmd_bench_designs, threads=None)
+
+    bcd = bsub.add_parser(
+        "codesign",
+        help="diffsim-codesign's kept design against the initial cube and random designs (JSON)",
+    )
+    bcd.add_argument("--preset", default="diffsim-3x3x3", help="a diffsim-codesign preset (default diffsim-3x3x3)")
+    bcd.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    bcd.add_argument("--designs", type=int, default=100, help="random designs (default 100)")
+    bcd.add_argument("--slews", type=int, default=16, help="slews each design flies (default 16)")
+    bcd.add_argument("--out", help="also write the JSON report to this file")
+    bcd.set_defaults(func=_cmd_bench_codesign, threads=None)
 
     pr = sub.add_parser("presets", help="list the named presets, or print one as JSON")
     pr.add_argument("name", nargs="?")

@@ -40,7 +40,8 @@ def load_plain(data: bytes, what: str, allow: list | tuple = ()) -> object:
 
 
 def _n_design(spec: JobSpec) -> int:
-    return N_DESIGN_INPUTS if spec.diffsim.design_pool > 0 else 0
+    conditioned = spec.diffsim.design_pool > 0 or spec.algorithm == "diffsim-codesign"
+    return N_DESIGN_INPUTS if conditioned else 0
 
 
 def network_of(spec: JobSpec) -> tuple[str, list[int], int]:

@@ -82,6 +82,7 @@ def monte_carlo(
     record: int = 0,
     dtype: torch.dtype = torch.float64,
     device: str = "cpu",
+    slews: int | None = None,
 ) -> MonteCarloResult:
     """Fly ``episodes`` seeded slews in one batch and collect their metrics.
 
@@ -90,13 +91,16 @@ def monte_carlo(
         controller: ``f(sim) -> action``, or a class whose constructor takes the sim and
             whose instances are such functions (e.g. :class:`~modsat_core.sim.pd.PDController`).
         record: number of leading episodes whose time histories are returned.
+        slews: if set, episode i flies slew ``i % slews`` of the seed's set (several designs
+            on the same slews); else episode i flies slew i.
     """
     if isinstance(designs, Design):
         designs = [designs] * episodes
     if len(designs) != episodes:
         raise ValueError(f"{len(designs)} designs for {episodes} episodes")
     sim = SlewSim.from_designs(designs, mission, modules, dtype=dtype, device=device)
-    sim.reset(list(range(episodes)), [draw_episode(r, mission) for r in episode_rngs(seed, episodes)])
+    draws = [draw_episode(r, mission) for r in episode_rngs(seed, slews or episodes)]
+    sim.reset(list(range(episodes)), [draws[i % len(draws)] for i in range(episodes)])
     if isinstance(controller, type):
         controller = controller(sim)
     done = torch.zeros(episodes, dtype=torch.bool, device=sim.device)

@@ -32,6 +32,7 @@ LABELS = {
     "ga": "GA",
     "td3-control": "TD3 (fixed design)",
     "diffsim-control": "first-order (fixed design)",
+    "diffsim-codesign": "first-order co-design",
 }
 #: The files of a finished run the report reads (:func:`saved_run`).
 FILES = ("spec.json", "curve.json", "design.json", "evaluation.json")

@@ -99,6 +99,22 @@ class Diffsim(_Section):
         description="The window's last step counts this many extra times (a stand-in for the cost after it).",
     )
 
+    design_batch: int = Field(
+        32,
+        ge=2,
+        le=4096,
+        description="`diffsim-codesign`: designs drawn from the design distribution at each design update.",
+    )
+    design_slews: int = Field(
+        8, ge=1, le=1000, description="`diffsim-codesign`: slews each drawn design flies for its objective."
+    )
+    design_every: int = Field(
+        4, ge=1, le=10_000, description="`diffsim-codesign`: controller updates between design updates."
+    )
+    design_lr: float = Field(
+        0.1, gt=0.0, le=10.0, description="`diffsim-codesign`: Adam learning rate of the per-cell type logits."
+    )
+
     @model_validator(mode="after")
     def _check(self) -> Diffsim:
         if self.lr_final > self.lr:

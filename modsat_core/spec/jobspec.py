@@ -16,7 +16,9 @@ from typing import Any, Literal
 from pydantic import Field, ValidationError, model_validator
 from pydantic_core import ErrorDetails
 
+from modsat_core.grid import is_connected
 from modsat_core.spec.diffsim import Diffsim
+from modsat_core.spec.objective import Objective
 from modsat_core.spec.sections import GA, DesignSpace, Evaluation, Mission, ModuleCatalog, RewardSpec, _Section
 from modsat_core.spec.training import Training
 
@@ -28,6 +30,7 @@ __all__ = [
     "JobSpec",
     "Mission",
     "ModuleCatalog",
+    "Objective",
     "RewardSpec",
     "SpecError",
     "Training",
@@ -45,11 +48,13 @@ class JobSpec(_Section):
 
     version: Literal[1] = SPEC_VERSION
     name: str | None = Field(None, max_length=200, description="A label for people; not used by the run.")
-    algorithm: Literal["td3-codesign", "ga", "td3-control", "diffsim-control"] = Field(
+    algorithm: Literal["td3-codesign", "ga", "td3-control", "diffsim-control", "diffsim-codesign"] = Field(
         "td3-codesign",
         description="`td3-codesign`: NCA design + control by TD3 (paper). `ga`: GA over designs with TD3 "
         "inner loops. `td3-control`: TD3 control of `design.fixed_design`. `diffsim-control`: control of "
-        "`design.fixed_design` learned by backpropagating a mission cost through the simulator (`diffsim`).",
+        "`design.fixed_design` learned by backpropagating a mission cost through the simulator (`diffsim`). "
+        "`diffsim-codesign`: a design distribution learned by policy gradient on `objective`, flown by a "
+        "design-conditioned `diffsim` controller trained on its designs.",
     )
     seed: int = Field(0, ge=0, le=2**31 - 1, description="Seeds networks, exploration and training slews.")
     design: DesignSpace = Field(default_factory=DesignSpace)
@@ -59,9 +64,16 @@ class JobSpec(_Section):
     ga: GA = Field(default_factory=GA)
     evaluation: Evaluation = Field(default_factory=Evaluation)
     diffsim: Diffsim = Field(default_factory=Diffsim)
+    objective: Objective = Field(default_factory=Objective)
 
     @model_validator(mode="after")
     def _check_consistency(self) -> JobSpec:
+        N, payload = self.design.grid_size, self.objective.payload_cells
+        outside = next((c for c in payload if max(c) >= N), None)
+        if outside is not None:
+            raise ValueError(f"objective.payload_cells: {list(outside)} is outside the {N}^3 grid")
+        if payload and not is_connected(_payload_grid(payload, N)):
+            raise ValueError("objective.payload_cells must be face-connected: the payload is one piece")
         if self.algorithm in ("td3-control", "diffsim-control") and self.design.fixed_design is None:
             raise ValueError(f"algorithm {self.algorithm!r} needs design.fixed_design")
         if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
@@ -69,10 +81,19 @@ class JobSpec(_Section):
         return self
 
 
+def _payload_grid(cells: list[tuple[int, int, int]], N: int) -> list:
+    grid = [[[0] * N for _ in range(N)] for _ in range(N)]
+    for i, j, k in cells:
+        grid[i][j][k] = 1
+    return grid
+
+
 def is_diffsim(spec: JobSpec) -> bool:
     """Whether ``spec``'s controllers are the first-order learner's (its policy, its memory, its
-    trainer): `diffsim-control`, and the GA with `ga.inner` `diffsim`."""
-    return spec.algorithm == "diffsim-control" or (spec.algorithm == "ga" and spec.ga.inner == "diffsim")
+    trainer): `diffsim-control`, `diffsim-codesign`, and the GA with `ga.inner` `diffsim`."""
+    return spec.algorithm in ("diffsim-control", "diffsim-codesign") or (
+        spec.algorithm == "ga" and spec.ga.inner == "diffsim"
+    )
 
 
 class UnrunnableSpec(ValueError):

@@ -82,6 +82,38 @@ _QUICK_MISSION = {
 }
 
 
+#: The first-order co-design presets' objective (`objective`; docs/diffsim.md, "Co-design"): a
+#: payload plate of structure modules under the design (the k = 0 layer), a module worth 0.05 s of
+#: slew time and a wheel unit 0.5 s more, and wheels of 0.05 N m (the paper's 3x3x3 has 0.8), so
+#: that the torque a design carries decides how fast it slews.
+DIFFSIM_CODESIGN_TAU_NM = 0.05
+
+
+def _diffsim_codesign(n: int, updates: int) -> JobSpec:
+    step = 256 * 32
+    return JobSpec.model_validate(
+        {
+            "name": f"diffsim-{n}x{n}x{n}",
+            "algorithm": "diffsim-codesign",
+            "design": {"grid_size": n},
+            "modules": {"torque_scale_Nm": DIFFSIM_CODESIGN_TAU_NM, "actuator_model": "reaction-wheel"},
+            "mission": {"reward": _HOLD_REWARD},
+            "objective": {
+                "module_price_s": 0.05,
+                "wheel_price_s": 0.5,
+                "payload_cells": [[i, j, 0] for i in range(n) for j in range(n)],
+            },
+            "training": {
+                "total_env_steps": updates * step,
+                "eval_every_steps": updates // 4 * step,
+                "eval_episodes": 16,
+                "checkpoint_every_steps": updates // 4 * step,
+                "device": "cpu",
+            },
+        }
+    )
+
+
 def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
     return JobSpec.model_validate(
         {
@@ -149,6 +181,8 @@ PRESETS: dict[str, JobSpec] = {
     # 2-core CPU in under an hour: the recipe above, the design held for 30k steps and then until
     # the curve lands 75 % of its slews, the curve every 5k env steps and the best of its 4 best
     # kept on validation slews (docs/learning.md, "The shipped recipe" and "Status").
+    # Co-design by the first-order learner on a priced objective (docs/diffsim.md, "Co-design").
+    "diffsim-3x3x3": _diffsim_codesign(3, 240),
     "cpu-3x3x3": JobSpec.model_validate(
         {
             "name": "cpu-3x3x3",

@@ -9,7 +9,7 @@ from pydantic import ValidationError
 from modsat_core.spec.jobspec import JobSpec, SpecError, format_errors, spec_errors
 
 MAX_SEEDS = 16
-ALGORITHMS = ("td3-codesign", "ga", "td3-control", "diffsim-control")
+ALGORITHMS = ("td3-codesign", "ga", "td3-control", "diffsim-control", "diffsim-codesign")
 #: A study's algorithms when it names none: the paper's comparison, RL co-design against the GA.
 #: (`td3-control` and `diffsim-control` fly the spec's `design.fixed_design`.)
 DEFAULT_ALGORITHMS = ("td3-codesign", "ga")

@@ -88,20 +88,16 @@ class DiffsimRun:
     """One `diffsim-control` run: the controller, its optimiser, the training flights, the curve."""
 
     def __init__(self, spec: JobSpec, device: str = "cpu"):
-        assert spec.design.fixed_design is not None  # the spec's validator requires it
         self.spec, self.d, self.t, self.device = spec, spec.diffsim, spec.training, device
         torch.manual_seed(spec.seed)
         self.policy = cast(DiffsimPolicy, new_actor(spec)).to(device)
         self.controller = DiffsimController(self.policy, spec.mission.rate_limit_rad_s, self.d.base)
         self.opt = torch.optim.Adam(self.policy.parameters(), lr=self.d.lr)
-        self.grid = np.asarray(spec.design.fixed_design, dtype=np.int64)
         B = self.d.batch_size
         self.rng = np.random.default_rng([spec.seed, 1])
-        # The designs training flies: the run's, and with a pool, random valid ones (drawn from a
-        # stream of their own, so that the pool is the same whatever the flights draw).
-        pool_rng = np.random.default_rng([spec.seed, 2])
-        grids = [self.grid] + [random_valid_design(pool_rng, spec.design.grid_size) for _ in range(self.d.design_pool)]
+        self.grid, grids = self.initial_pool()
         self.pool = [Design.from_grid(g, spec.modules) for g in grids]
+        self.active = (0, len(self.pool))  # the pool's slice a new training slew draws its design from
         self.row_design = torch.zeros(B, dtype=torch.long)
         if len(self.pool) > 1:
             self.row_design = torch.as_tensor(self.rng.integers(0, len(self.pool), size=B), dtype=torch.long)
@@ -128,6 +124,16 @@ class DiffsimRun:
         self.last: dict[str, float] = {}
         self.next_eval = self.t.eval_every_steps
         self.next_ckpt = self.t.checkpoint_every_steps
+
+    def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
+        """The design the curve flies, and the designs training flies: the run's, and with a pool,
+        random valid ones (drawn from a stream of their own, so that the pool is the same whatever
+        the flights draw)."""
+        assert self.spec.design.fixed_design is not None  # the spec's validator requires it
+        grid = np.asarray(self.spec.design.fixed_design, dtype=np.int64)
+        pool_rng = np.random.default_rng([self.spec.seed, 2])
+        N = self.spec.design.grid_size
+        return grid, [grid] + [random_valid_design(pool_rng, N) for _ in range(self.d.design_pool)]
 
     # ------------------------------------------------------------------ schedule
     @property
@@ -161,7 +167,7 @@ class DiffsimRun:
         idx = torch.nonzero(ended).flatten()
         if len(idx):
             if len(self.pool) > 1:
-                self.row_design[idx] = torch.as_tensor(self.rng.integers(0, len(self.pool), size=len(idx)))
+                self.row_design[idx] = torch.as_tensor(self.rng.integers(*self.active, size=len(idx)))
                 self.fly_designs(idx)
             self.sim.reset(idx.tolist(), [draw_episode(self.rng, self.spec.mission) for _ in range(len(idx))])
             self.ep_steps[idx] = 0

@@ -26,6 +26,7 @@ from modsat_core.training.checkpoint import (
     to_device,
 )
 from modsat_core.training.diffsim import DiffsimRun
+from modsat_core.training.diffsim_codesign import DiffsimCodesignRun
 from modsat_core.training.ga import GARun
 from modsat_core.training.td3_trainer import TD3Run
 
@@ -58,7 +59,11 @@ def train(
             on_progress, on_checkpoint, should_stop, checkpoint
         )
     device = resolve_device(spec.training.device)
-    run: TD3Run | DiffsimRun = DiffsimRun(spec, device=device) if is_diffsim(spec) else TD3Run(spec, device=device)
+    run: TD3Run | DiffsimRun
+    if spec.algorithm == "diffsim-codesign":
+        run = DiffsimCodesignRun(spec, device=device)
+    else:
+        run = DiffsimRun(spec, device=device) if is_diffsim(spec) else TD3Run(spec, device=device)
     if checkpoint is not None:
         run.load_state_dict(to_device(checkpoint["run"], device))
 

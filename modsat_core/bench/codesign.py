@@ -1,0 +1,117 @@
+"""``modsat bench codesign``: what `diffsim-codesign` designs, against the initial design and random
+designs flown by the same controller.
+
+One `diffsim-codesign` run of a preset (`diffsim-3x3x3`) and seed, timed from its start to its
+final evaluation. Then its controller (at the end of training) flies, on the same ``slews`` slews
+(a seed of their own, not the validation slews the kept design was chosen on), in float64 on the
+mission's physics: the kept design; the initial design (the full cube of structure modules with its
+centre actuator, the paper's initial design, the payload included); and ``designs`` random valid
+designs from the distribution the run starts from (every free cell empty, structure or actuator
+with equal chance, the payload kept). PD flies the same. Each is scored by the objective (seconds,
+lower is better). One torch thread. The output is a JSON object.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from modsat_core.agent.policy_file import load_policy
+from modsat_core.bench.learners import _cpu_model
+from modsat_core.grid import ACTUATOR, EMPTY
+from modsat_core.sim.gym_envs import reference_design
+from modsat_core.sim.pd import PDController
+from modsat_core.spec.jobspec import JobSpec, parse_spec
+from modsat_core.spec.presets import get_preset
+from modsat_core.training.diffsim_codesign import fixed_cells, satellites, score_designs
+
+
+def random_designs(spec: JobSpec, n: int, seed: int) -> list[np.ndarray]:
+    """``n`` valid satellites drawn from the uniform per-cell distribution, the payload kept."""
+    fixed, types = fixed_cells(spec)
+    rng = np.random.default_rng([seed, 7])
+    N = spec.design.grid_size
+    out: list[np.ndarray] = []
+    while len(out) < n:
+        raw = np.where(fixed, types, rng.integers(0, 3, size=(1, N, N, N)))
+        g = satellites(raw, fixed)[0]
+        if (g == ACTUATOR).any():
+            out.append(g)
+    return out
+
+
+def initial_design(spec: JobSpec) -> np.ndarray:
+    """The full cube with its centre actuator; the payload cells structure."""
+    fixed, types = fixed_cells(spec)
+    return np.where(fixed, types, reference_design(spec.design.grid_size)).astype(np.int64)
+
+
+def _figures(grid: np.ndarray) -> dict[str, int]:
+    return {"modules": int((grid != EMPTY).sum()), "wheels": int((grid == ACTUATOR).sum())}
+
+
+def bench_codesign(preset: str, seed: int, designs: int, slews: int) -> dict[str, Any]:
+    from modsat_core.training.train import train
+
+    torch.set_num_threads(1)
+    d = get_preset(preset).model_dump(mode="json")
+    d["seed"] = seed
+    spec = parse_spec(d)
+    t0 = time.monotonic()
+    ended: list[float] = []
+
+    def progress(p: dict) -> None:
+        if p.get("phase") == "evaluating" and not ended:
+            ended.append(time.monotonic() - t0)
+
+    files = train(spec, on_progress=progress).artifacts()
+    wall = time.monotonic() - t0
+    policy, kept, spec = load_policy(files["policy.pt"])
+    assert kept is not None
+    ev = json.loads(files["evaluation.json"])
+    cube = initial_design(spec)
+    rand = random_designs(spec, designs, seed)
+    grids = [kept, cube, *rand]
+    cmp_seed = spec.evaluation.seed + 2
+    learned = score_designs(spec, policy.double(), grids, slews, cmp_seed, exact=True)
+    pd = score_designs(spec, PDController, grids, slews, cmp_seed, exact=True)
+    r_learned, r_pd = np.asarray(learned[2:]), np.asarray(pd[2:])
+    best = int(np.argmin(r_learned))
+    curve = json.loads(files["curve.json"])
+    return {
+        "preset": preset,
+        "seed": seed,
+        "train_s": round(ended[0], 1) if ended else None,
+        "wall_s": round(wall, 1),
+        "slews": slews,
+        "objective_s": {
+            "kept": {"diffsim": learned[0], "pd": pd[0], **_figures(kept)},
+            "initial_cube": {"diffsim": learned[1], "pd": pd[1], **_figures(cube)},
+            "random": {
+                "designs": designs,
+                "diffsim_best": float(r_learned.min()),
+                "diffsim_median": float(np.median(r_learned)),
+                "diffsim_worst": float(r_learned.max()),
+                "pd_best": float(r_pd.min()),
+                "pd_median": float(np.median(r_pd)),
+                "pd_worst": float(r_pd.max()),
+                "best_by_diffsim": _figures(rand[best]),
+            },
+        },
+        "kept_design": kept.tolist(),
+        "kept_changed": not np.array_equal(kept, cube),
+        "own_policy_success": ev["policy"]["summary"].get(f"success_rate_at_{spec.mission.tolerance_deg:g}_deg"),
+        "own_policy_violations": ev["policy"]["summary"]["safety_violations"],
+        "own_policy_median_settling_s": ev["policy"]["summary"]["median_settling_time_s"],
+        "pd_median_settling_s": ev["pd_baseline"]["summary"]["median_settling_time_s"],
+        "design_updates": [
+            {k: r[k] for k in ("updates", "mean_objective_s", "best_objective_s", "modules", "actuators")}
+            for r in curve["designs"]
+        ],
+        "cpu": _cpu_model(),
+        "torch": torch.__version__,
+    }

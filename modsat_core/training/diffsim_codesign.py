@@ -1,0 +1,262 @@
+"""`diffsim-codesign`: a design distribution learned by policy gradient, flown by a design-conditioned
+first-order controller trained on its designs.
+
+The design is a distribution over grids: independent per-cell type logits (empty, structure,
+actuator), payload cells fixed to structure (``objective.payload_cells``; with none, the centre cell
+is an actuator, the seed the paper's designs grow from). A drawn grid becomes a satellite by keeping
+what is face-connected to those fixed cells; it is valid if it then has a wheel unit.
+
+The run alternates:
+
+- ``diffsim.design_every`` controller updates as `diffsim-control`'s (:class:`DiffsimRun`), the
+  controller design-conditioned (``diffsim.design_pool`` > 0's inputs) and every training slew
+  flying one of the distribution's latest draws (or its mode);
+- one design update: ``design_batch`` grids drawn, each flown by the controller on the same
+  ``design_slews`` slews (the training physics, no gradient), each scored by the objective
+  (:func:`objective_s`, lower is better; an invalid grid scores worse than any valid one), and the
+  logits moved by the score-function gradient (REINFORCE with the batch's mean as baseline,
+  advantages normalised) with Adam (``design_lr``).
+
+Why the score function rather than the gradient through a relaxed grid: the objective prices whole
+modules and wheel units and counts slews that do not land, and a design must be connected and carry
+a wheel; none of these is a differentiable function of cell probabilities, and a relaxed grid's
+"0.4 of a wheel" has no physical meaning for the controller that must fly it (docs/diffsim.md).
+
+The kept design: the distribution's mode and the run's three best draws are flown on the
+validation slews (``evaluation.episodes`` of them, the mission's physics) and the best objective
+wins; the final evaluation flies it with the controller at the end of training, beside PD.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import torch
+
+from modsat_core.agent.policy_file import actor_from_state
+from modsat_core.evaluation.monte_carlo import monte_carlo
+from modsat_core.grid import ACTUATOR, EMPTY, STRUCTURE, flood_fill
+from modsat_core.sim.slew import Design
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.objective import Objective
+from modsat_core.training.diffsim import DiffsimRun, training_mission
+
+#: Candidates for the kept design besides the distribution's mode: the run's best draws.
+TOP_DRAWS = 3
+
+
+def objective_s(episodes: list[dict], grid: np.ndarray, objective: Objective, episode_s: float) -> float:
+    """A design's objective (seconds, lower is better; the module docstring of
+    :mod:`modsat_core.spec.objective`) from its flown ``episodes`` (monte_carlo rows)."""
+    times = [e["settling_time_s"] if e["success"] else episode_s for e in episodes]
+    g = np.asarray(grid)
+    modules, wheels = int((g != EMPTY).sum()), int((g == ACTUATOR).sum())
+    return float(np.mean(times)) + objective.module_price_s * modules + objective.wheel_price_s * wheels
+
+
+def fixed_cells(spec: JobSpec) -> tuple[np.ndarray, np.ndarray]:
+    """The cells the design learner never changes, (N, N, N) bool, and their types (int64)."""
+    N = spec.design.grid_size
+    mask = np.zeros((N, N, N), dtype=bool)
+    types = np.zeros((N, N, N), dtype=np.int64)
+    payload = spec.objective.payload_cells
+    if payload:
+        for c in payload:
+            mask[c], types[c] = True, STRUCTURE
+    else:
+        c = (N // 2,) * 3
+        mask[c], types[c] = True, ACTUATOR
+    return mask, types
+
+
+def satellites(raw: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """(M, N, N, N) drawn grids -> the satellites they make: the modules face-connected to the
+    fixed cells (which every draw has)."""
+    filled = raw != EMPTY
+    reached = flood_fill(np.broadcast_to(fixed, raw.shape) & filled, filled)
+    return np.where(reached, raw, EMPTY).astype(np.int64)
+
+
+def score_designs(
+    spec: JobSpec, controller: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool
+) -> list[float]:
+    """The objective of each grid flown on the same ``slews`` slews of ``seed`` by ``controller``:
+    a design-conditioned :class:`~modsat_core.agent.diffsim_policy.DiffsimPolicy`, or a controller
+    class such as :class:`~modsat_core.sim.pd.PDController`. The training physics in float32, or
+    the mission's in float64 when ``exact``. A grid without a wheel unit scores worse than any
+    valid design."""
+    from modsat_core.agent.diffsim_policy import DiffsimPolicy
+    from modsat_core.agent.policy import controller_for
+
+    obj = spec.objective
+    mission = spec.mission if exact else training_mission(spec.mission, spec.diffsim.substeps)
+    episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
+    worst = episode_s + spec.design.grid_size**3 * (obj.module_price_s + obj.wheel_price_s)
+    valid = [i for i, g in enumerate(grids) if (g == ACTUATOR).any()]
+    out = [worst] * len(grids)
+    if not valid:
+        return out
+    designs = [Design.from_grid(grids[i], spec.modules) for i in valid for _ in range(slews)]
+    if isinstance(controller, DiffsimPolicy):
+        controller = controller_for(controller, grids[valid[0]], spec)
+    dtype = torch.float64 if exact else torch.float32
+    with torch.no_grad():
+        mc = monte_carlo(
+            designs, controller, mission, spec.modules, episodes=len(designs), seed=seed, dtype=dtype, slews=slews
+        )
+    for j, i in enumerate(valid):
+        out[i] = objective_s(mc.episodes[j * slews : (j + 1) * slews], grids[i], obj, episode_s)
+    return out
+
+
+class DiffsimCodesignRun(DiffsimRun):
+    """One `diffsim-codesign` run (see the module docstring)."""
+
+    def __init__(self, spec: JobSpec, device: str = "cpu"):
+        N = spec.design.grid_size
+        self.fixed, self.fixed_types = fixed_cells(spec)
+        self.logits = torch.zeros(N**3, 3, dtype=torch.float64, requires_grad=True)
+        self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
+        self.design_rng = np.random.default_rng([spec.seed, 5])
+        self.records: list[dict] = []  # one per design update
+        self.best: list[dict] = []  # the run's best draws, best first: {"grid", "objective_s"}
+        super().__init__(spec, device)
+
+    # ------------------------------------------------------------------ the distribution
+    def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
+        """The mode and a first batch of draws, those that are valid; first of all, a design with a
+        wheel unit in every free cell, so that the simulator has a slot for every wheel a draw can
+        have (it flies only the first slews of the rows that draw it)."""
+        N = self.spec.design.grid_size
+        every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
+        every[self.fixed] = self.fixed_types[self.fixed]
+        grids, _ = self.draw(self.d.design_batch)
+        flyable = [g for g in [self.mode(), *grids] if (g == ACTUATOR).any()]  # a wheel unit: valid
+        return (flyable or [every])[0], [every, *flyable]
+
+    def probabilities(self) -> np.ndarray:
+        return torch.softmax(self.logits.detach(), dim=-1).numpy()
+
+    def draw(self, M: int) -> tuple[np.ndarray, np.ndarray]:
+        """``M`` satellites from the distribution and the raw grids they were drawn as."""
+        N = self.spec.design.grid_size
+        p = self.probabilities()
+        u = self.design_rng.random((M, N**3, 1))
+        raw = (u > np.cumsum(p, axis=-1)[None, :, :2]).sum(-1).reshape(M, N, N, N)
+        raw = np.where(self.fixed, self.fixed_types, raw)
+        return satellites(raw, self.fixed), raw
+
+    def mode(self) -> np.ndarray:
+        N = self.spec.design.grid_size
+        raw = self.probabilities().argmax(-1).reshape(1, N, N, N)
+        return satellites(np.where(self.fixed, self.fixed_types, raw), self.fixed)[0]
+
+    def log_prob(self, raw: np.ndarray) -> torch.Tensor:
+        """(M,) log-probability of each raw grid under the logits (the fixed cells excluded)."""
+        logp = torch.log_softmax(self.logits, dim=-1)
+        idx = torch.as_tensor(raw.reshape(len(raw), -1))
+        free = torch.as_tensor(~self.fixed.reshape(-1), dtype=torch.float64)
+        return (logp.gather(1, idx.T).T * free).sum(-1)
+
+    # ------------------------------------------------------------------ scoring
+    def score(self, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[float]:
+        """The objective of each grid flown by the controller (:func:`score_designs`)."""
+        policy = copy.deepcopy(self.policy).cpu().eval()
+        return score_designs(self.spec, policy.double() if exact else policy, grids, slews, seed, exact)
+
+    def design_update(self) -> None:
+        """Draw, score, step the logits, refresh the designs training flies (module docstring)."""
+        M = self.d.design_batch
+        grids, raw = self.draw(M)
+        seed = int(self.design_rng.integers(2**31))
+        J = np.asarray(self.score(list(grids), self.d.design_slews, seed, exact=False))
+        adv = torch.as_tensor((J - J.mean()) / (J.std() + 1e-8))
+        loss = (adv * self.log_prob(raw)).mean()  # descending it lowers the expected objective
+        self.design_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.design_opt.step()
+        for g, j in sorted(zip(list(grids), J.tolist(), strict=True), key=lambda x: x[1])[:TOP_DRAWS]:
+            if (g == ACTUATOR).any() and not any(np.array_equal(g, b["grid"]) for b in self.best):
+                self.best.append({"grid": g, "objective_s": j})
+        self.best = sorted(self.best, key=lambda b: b["objective_s"])[:TOP_DRAWS]
+        mode = self.mode()
+        if (mode == ACTUATOR).any():
+            self.grid = mode
+        else:  # the mode has no wheel yet: the curve flies the run's best draw
+            self.grid = self.best[0]["grid"]
+        fresh = [g for g in [self.grid, *grids] if (g == ACTUATOR).any()]
+        start = len(self.pool)
+        self.pool += [Design.from_grid(g, self.spec.modules) for g in fresh]
+        self.active = (start, len(self.pool))
+        p = self.probabilities()
+        self.records.append(
+            {
+                "updates": self.updates,
+                "env_steps": self.env_steps,
+                "mean_objective_s": float(J.mean()),
+                "best_objective_s": float(J.min()),
+                "valid_draws": int(sum((g == ACTUATOR).any() for g in grids)),
+                "entropy_nats": float(-(p * np.log(p + 1e-12)).sum(-1)[~self.fixed.reshape(-1)].mean()),
+                "mode": mode.tolist(),
+                "modules": int((mode != EMPTY).sum()),
+                "actuators": int((mode == ACTUATOR).sum()),
+            }
+        )
+
+    def update(self) -> dict[str, float]:
+        out = super().update()
+        if self.updates % self.d.design_every == 0:
+            self.design_update()
+        return out
+
+    # ------------------------------------------------------------------ the end
+    def chosen(self) -> tuple[torch.nn.Module, np.ndarray, dict]:
+        """The controller at the end of training and the kept design: the mode or one of the run's
+        best draws, whichever scores best on the validation slews."""
+        candidates = [self.mode(), *[b["grid"] for b in self.best]]
+        unique: list[np.ndarray] = []
+        for g in candidates:
+            if (g == ACTUATOR).any() and not any(np.array_equal(g, u) for u in unique):
+                unique.append(g)
+        ev = self.spec.evaluation
+        scores = self.score(unique, ev.episodes, ev.seed + 1, exact=True)
+        best = int(np.argmin(scores))
+        selection = [
+            {"grid": g.tolist(), "objective_s": s, "mode": i == 0 and np.array_equal(g, candidates[0])}
+            for i, (g, s) in enumerate(zip(unique, scores, strict=True))
+        ]
+        extra: dict[str, Any] = {"designs": self.records, "selection": selection}
+        actor = actor_from_state(self.spec, {k: v.cpu() for k, v in self.policy.state_dict().items()})
+        return actor, unique[best], extra
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_dict(self) -> dict:
+        d = super().state_dict()
+        d["codesign"] = {
+            "logits": self.logits.detach().clone(),
+            "design_opt": self.design_opt.state_dict(),
+            "design_rng": self.design_rng.bit_generator.state,
+            "records": copy.deepcopy(self.records),
+            "best": [{"grid": b["grid"].tolist(), "objective_s": b["objective_s"]} for b in self.best],
+            "pool": [d.grid.tolist() for d in self.pool],
+            "active": list(self.active),
+            "grid": self.grid.tolist(),
+        }
+        return d
+
+    def load_state_dict(self, d: dict) -> None:
+        c = d["codesign"]
+        with torch.no_grad():
+            self.logits.copy_(c["logits"])
+        self.design_opt.load_state_dict(c["design_opt"])
+        self.design_rng.bit_generator.state = c["design_rng"]
+        self.records = list(c["records"])
+        self.best = [
+            {"grid": np.asarray(b["grid"], dtype=np.int64), "objective_s": b["objective_s"]} for b in c["best"]
+        ]
+        self.pool = [Design.from_grid(np.asarray(g, dtype=np.int64), self.spec.modules) for g in c["pool"]]
+        self.active = (int(c["active"][0]), int(c["active"][1]))
+        super().load_state_dict(d)
+        self.grid = np.asarray(c["grid"], dtype=np.int64)

@@ -1,0 +1,112 @@
+"""diffsim-codesign: the design distribution, its draws and the satellites they make, the run's
+outputs and resume."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from modsat_core.agent.diffsim_policy import N_DESIGN_INPUTS, DiffsimPolicy
+from modsat_core.agent.policy_file import load_policy
+from modsat_core.grid import ACTUATOR, EMPTY, STRUCTURE, is_valid
+from modsat_core.spec.jobspec import JobSpec, SpecError, parse_spec
+from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
+from modsat_core.training.diffsim_codesign import DiffsimCodesignRun, objective_s, satellites
+from modsat_core.training.train import train
+
+PAYLOAD = [[0, 0, 0], [0, 0, 1]]
+
+
+def tiny_codesign(**over) -> JobSpec:
+    """A diffsim-codesign run on a 2x2x2 grid that trains in seconds (mechanics, not quality)."""
+    d: dict = {
+        "name": "tiny-codesign",
+        "algorithm": "diffsim-codesign",
+        "seed": 5,
+        "design": {"grid_size": 2},
+        "modules": {"torque_scale_Nm": 0.05, "actuator_model": "reaction-wheel"},
+        "mission": {"episode_steps": 24, "tolerance_deg": 1.0},
+        "training": {"total_env_steps": 6 * 32, "eval_every_steps": 64, "eval_episodes": 3},
+        "diffsim": {
+            "batch_size": 8,
+            "window_steps": 4,
+            "episode_steps": 12,
+            "substeps": 2,
+            "hidden_sizes": [8],
+            "design_batch": 6,
+            "design_slews": 2,
+            "design_every": 2,
+        },
+        "objective": {"module_price_s": 0.01, "wheel_price_s": 0.1, "payload_cells": PAYLOAD},
+        "evaluation": {"episodes": 3, "trajectories": 1},
+    }
+    for key, value in over.items():
+        section, _, field = key.partition("__")
+        d[section][field] = value
+    return JobSpec.model_validate(d)
+
+
+def test_draws_keep_the_payload_and_only_what_is_connected_to_it():
+    run = DiffsimCodesignRun(tiny_codesign(diffsim__design_batch=64))
+    grids, raw = run.draw(64)
+    for g, r in zip(grids, raw, strict=True):
+        assert g[0, 0, 0] == g[0, 0, 1] == STRUCTURE and r[0, 0, 0] == r[0, 0, 1] == STRUCTURE
+        assert set(np.unique(g)) <= {EMPTY, STRUCTURE, ACTUATOR}
+        assert np.all((g == r) | (g == EMPTY))  # a satellite only drops modules
+        if (g == ACTUATOR).any():
+            assert is_valid(g)
+    # a module cut off from the payload is dropped
+    lone = np.zeros((1, 2, 2, 2), dtype=np.int64)
+    lone[0, 0, 0, :] = STRUCTURE
+    lone[0, 1, 1, 1] = ACTUATOR
+    assert satellites(lone, run.fixed)[0, 1, 1, 1] == EMPTY
+    # the log-probability counts the free cells only, under the uniform start
+    assert torch.allclose(run.log_prob(raw), torch.full((64,), 6 * np.log(1 / 3), dtype=torch.float64))
+
+
+def test_the_objective_counts_time_failures_modules_and_wheels():
+    obj = tiny_codesign().objective
+    grid = np.zeros((2, 2, 2), dtype=np.int64)
+    grid[0, 0, :] = STRUCTURE
+    grid[0, 1, 0] = ACTUATOR
+    episodes = [{"success": True, "settling_time_s": 3.0}, {"success": False, "settling_time_s": None}]
+    assert objective_s(episodes, grid, obj, episode_s=10.0) == pytest.approx(6.5 + 3 * 0.01 + 0.1)
+
+
+def test_a_run_learns_a_design_writes_every_output_and_resumes_the_same():
+    spec = tiny_codesign()
+    result = train(spec)
+    files = result.artifacts()
+    curve = json.loads(files["curve.json"])
+    assert curve["algorithm"] == "diffsim-codesign"
+    assert len(curve["designs"]) == 3  # 6 updates, a design update every 2
+    assert all(r["valid_draws"] <= 6 and "mode" in r for r in curve["designs"])
+    kept = json.loads(files["design.json"])["grid"]
+    assert is_valid(np.asarray(kept)) and kept[0][0][0] == kept[0][0][1] == STRUCTURE
+    assert any(s["grid"] == kept for s in curve["selection"])
+    assert min(s["objective_s"] for s in curve["selection"]) == next(
+        s["objective_s"] for s in curve["selection"] if s["grid"] == kept
+    )
+    policy, grid, _ = load_policy(files["policy.pt"])
+    assert isinstance(policy, DiffsimPolicy) and policy.n_design == N_DESIGN_INPUTS
+    assert grid.tolist() == kept
+    assert {"policy_export.pt", "evaluation.json"} <= set(files)
+    ckpts: list[dict] = []
+    stops = iter([False, False, False, True])
+    first = train(spec, on_checkpoint=ckpts.append, should_stop=lambda: next(stops, False))
+    assert first.stopped
+    resumed = train(spec, checkpoint=checkpoint_from_bytes(checkpoint_to_bytes(ckpts[-1])))
+    assert resumed.artifacts()["curve.json"] == files["curve.json"]
+    assert resumed.artifacts()["evaluation.json"] == files["evaluation.json"]
+
+
+def test_the_payload_must_fit_the_grid_and_be_one_piece():
+    with pytest.raises(SpecError, match="outside"):
+        parse_spec({"design": {"grid_size": 2}, "objective": {"payload_cells": [[0, 0, 2]]}})
+    with pytest.raises(SpecError, match="face-connected"):
+        parse_spec({"objective": {"payload_cells": [[0, 0, 0], [2, 2, 2]]}})
+    with pytest.raises(SpecError, match="distinct"):
+        parse_spec({"objective": {"payload_cells": [[0, 0, 0], [0, 0, 0]]}})
