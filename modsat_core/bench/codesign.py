@@ -8,7 +8,9 @@ mission's physics: the kept design; the initial design (the full cube of structu
 centre actuator, the paper's initial design, the payload included); and ``designs`` random valid
 designs from the distribution the run starts from (every free cell empty, structure or actuator
 with equal chance, the payload kept). PD flies the same. Each is scored by the objective (seconds,
-lower is better). One torch thread. The output is a JSON object.
+lower is better). Then the GA on the same objective and env-step budget (:func:`ga_row`): its best
+design flown by its own controller on the same slews. One torch thread. The output is a JSON
+object.
 """
 
 from __future__ import annotations
@@ -54,6 +56,45 @@ def _figures(grid: np.ndarray) -> dict[str, int]:
     return {"modules": int((grid != EMPTY).sum()), "wheels": int((grid == ACTUATOR).sum())}
 
 
+#: The GA of the comparison: generations of 8 designs, each its own `diffsim-control` run of 16
+#: updates, the objective its fitness; the same env-step budget as the co-design run.
+GA_POPULATION, GA_UPDATES_PER_DESIGN = 8, 16
+
+
+def ga_row(spec: JobSpec, seed: int, cmp_seed: int, slews: int) -> dict[str, Any]:
+    """The GA (``ga.inner`` diffsim, ``ga.fitness`` objective) on ``spec``'s objective and budget:
+    its best design flown by its own controller on the comparison slews, and its wall time."""
+    from modsat_core.agent.policy import controller_for
+    from modsat_core.training.train import train
+
+    d = spec.model_dump(mode="json")
+    step = d["diffsim"]["batch_size"] * d["diffsim"]["window_steps"]
+    d.update(algorithm="ga", seed=seed, name="bench-codesign-ga")
+    d["ga"].update(
+        inner="diffsim",
+        fitness="objective",
+        population_size=GA_POPULATION,
+        steps_per_design=GA_UPDATES_PER_DESIGN * step,
+    )
+    d["training"].update(eval_every_steps=GA_UPDATES_PER_DESIGN * step)
+    ga_spec = parse_spec(d)
+    t0 = time.monotonic()
+    files = train(ga_spec).artifacts()
+    wall = time.monotonic() - t0
+    policy, grid, ga_spec = load_policy(files["policy.pt"])
+    assert grid is not None
+    controller = controller_for(policy.double(), grid, ga_spec)
+    score = score_designs(ga_spec, controller, [grid], slews, cmp_seed, exact=True)[0]
+    ev = json.loads(files["evaluation.json"])["policy"]["summary"]
+    return {
+        "objective_s": score,
+        **_figures(grid),
+        "wall_s": round(wall, 1),
+        "designs_evaluated": len(json.loads(files["curve.json"])["designs"]),
+        "own_policy_success": ev.get(f"success_rate_at_{ga_spec.mission.tolerance_deg:g}_deg"),
+    }
+
+
 def bench_codesign(preset: str, seed: int, designs: int, slews: int) -> dict[str, Any]:
     from modsat_core.training.train import train
 
@@ -82,6 +123,7 @@ def bench_codesign(preset: str, seed: int, designs: int, slews: int) -> dict[str
     r_learned, r_pd = np.asarray(learned[2:]), np.asarray(pd[2:])
     best = int(np.argmin(r_learned))
     curve = json.loads(files["curve.json"])
+    ga = ga_row(spec, seed, cmp_seed, slews)
     return {
         "preset": preset,
         "seed": seed,
@@ -102,6 +144,7 @@ def bench_codesign(preset: str, seed: int, designs: int, slews: int) -> dict[str
                 "best_by_diffsim": _figures(rand[best]),
             },
         },
+        "ga": ga,
         "kept_design": kept.tolist(),
         "kept_changed": not np.array_equal(kept, cube),
         "own_policy_success": ev["policy"]["summary"].get(f"success_rate_at_{spec.mission.tolerance_deg:g}_deg"),

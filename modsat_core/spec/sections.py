@@ -234,6 +234,14 @@ class GA(_Section):
             "`diffsim-control`). Its budget is `steps_per_design` env steps."
         ),
     )
+    fitness: Literal["return", "objective"] = Field(
+        "return",
+        description=(
+            "A design's fitness: `return`, its inner controller's best curve return (the paper's); "
+            "`objective`, minus its `objective` (seconds, docs/diffsim.md) flown by that controller on "
+            "`diffsim.design_slews` slews. With `objective.payload_cells` every design carries the payload."
+        ),
+    )
     population_size: int = Field(12, ge=2, le=1000, description="Designs per generation.")
     survivor_start: float = Field(0.6, ge=0.0, le=1.0, description="Survivor fraction at the start of the budget.")
     survivor_end: float = Field(0.0, ge=0.0, le=1.0, description="Survivor fraction at the end of the budget.")

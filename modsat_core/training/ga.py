@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from modsat_core.agent.policy import controller_for
 from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.artefacts import CurvePoint, ProgressRecord
 from modsat_core.evaluation.run_files import run_files
@@ -35,6 +36,7 @@ from modsat_core.grid import is_valid, random_design
 from modsat_core.spec.jobspec import JobSpec, is_diffsim
 from modsat_core.training.checkpoint import CHECKPOINT_VERSION, RunResult
 from modsat_core.training.diffsim import DiffsimRun
+from modsat_core.training.diffsim_codesign import fixed_cells, satellites, score_designs
 from modsat_core.training.td3_trainer import TD3Run
 
 MAX_DRAWS = 100_000
@@ -115,7 +117,18 @@ class GARun:
     # ------------------------------------------------------------------ evolution
     def _first_generation(self) -> None:
         P = self.spec.ga.population_size
-        self.pending = [draw_unique(self.rng, lambda: random_design(self.rng, self.N), self.seen) for _ in range(P)]
+
+        def make() -> np.ndarray:
+            return self.with_payload(random_design(self.rng, self.N))
+
+        self.pending = [draw_unique(self.rng, make, self.seen) for _ in range(P)]
+
+    def with_payload(self, grid: np.ndarray) -> np.ndarray:
+        """``grid`` with the spec's payload cells (if any) and only what is connected to them."""
+        if not self.spec.objective.payload_cells:
+            return grid
+        fixed, types = fixed_cells(self.spec)
+        return satellites(np.where(fixed, types, grid)[None], fixed)[0]
 
     def _next_generation(self) -> None:
         n_surv, frac = survivor_count(self.spec, self.used)
@@ -127,7 +140,7 @@ class GARun:
 
         def child() -> np.ndarray:
             parent = self.records[survivors[int(self.rng.integers(len(survivors)))]]["grid"]
-            return mutate(self.rng, np.asarray(parent, dtype=np.int64), rate)
+            return self.with_payload(mutate(self.rng, np.asarray(parent, dtype=np.int64), rate))
 
         self.pending = [draw_unique(self.rng, child, self.seen) for _ in range(P - n_surv)]
         self.population = list(survivors)
@@ -157,7 +170,8 @@ class GARun:
                 one = one.model_copy(update={"total_env_steps": budget})
                 design = self.spec.design.model_copy(update={"fixed_design": grid.tolist()})
                 update = {"seed": seed, "training": one, "design": design, "algorithm": "diffsim-control"}
-                run = DiffsimRun(self.spec.model_copy(update=update), device=self.device)
+                inner_spec = self.spec.model_copy(update=update)
+                run = DiffsimRun(inner_spec, device=self.device)
             else:
                 inner_spec = self.spec.model_copy(update={"seed": seed, "training": one})
                 run = TD3Run(inner_spec, fixed_grid=grid, device=self.device)
@@ -194,9 +208,16 @@ class GARun:
             self.inner_ckpt = None
             assert run.kept  # a finished run has evaluated at least once
             fitness = run.kept[0]["mean_return"]
+            objective: dict = {}
+            if self.spec.ga.fitness == "objective":  # the design's price, flown by its own controller
+                controller = controller_for(actor_from_state(inner_spec, run.kept[0]["actor"]), grid, inner_spec)
+                slews = self.spec.diffsim.design_slews
+                objective["objective_s"] = score_designs(self.spec, controller, [grid], slews, seed, exact=False)[0]
+                fitness = -objective["objective_s"]
             self.used += run.env_steps
             self.records.append(
                 {
+                    **objective,
                     "grid": grid.tolist(),
                     "fitness": fitness,
                     "generation": self.generation,

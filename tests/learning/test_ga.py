@@ -96,3 +96,22 @@ def test_ga_with_the_first_order_learner_inside():
     resumed = train(spec, checkpoint=checkpoint_from_bytes(checkpoint_to_bytes(ckpts[-1])))
     assert resumed.artifacts()["curve.json"] == files["curve.json"]
     assert resumed.artifacts()["evaluation.json"] == files["evaluation.json"]
+
+
+def test_ga_on_the_priced_objective_keeps_the_payload():
+    """`ga.fitness` objective: every design carries the payload, its fitness is minus its objective
+    (seconds) flown by its own controller."""
+    spec = tiny_spec(
+        algorithm="ga",
+        training__total_env_steps=4 * 32,
+        training__eval_every_steps=10**6,
+        ga={"population_size": 3, "steps_per_design": 32, "inner": "diffsim", "fitness": "objective"},
+        diffsim={"batch_size": 8, "window_steps": 4, "episode_steps": 12, "substeps": 2, "hidden_sizes": [8]},
+        objective={"module_price_s": 0.01, "wheel_price_s": 0.1, "payload_cells": [[0, 0, 0], [0, 0, 1]]},
+    )
+    designs = json.loads(train(spec).artifacts()["curve.json"])["designs"]
+    assert len(designs) == 4
+    for d in designs:
+        g = np.asarray(d["grid"])
+        assert is_valid(g) and g[0, 0, 0] == g[0, 0, 1] == 1
+        assert d["fitness"] == -d["objective_s"] and d["objective_s"] > 0.01 * (g > 0).sum()
