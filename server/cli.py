@@ -124,7 +124,12 @@ def _cmd_bench_codesign(args: argparse.Namespace) -> int:
     from modsat_core.bench.codesign import bench_codesign
     from modsat_core.spec.presets import get_preset
 
-    get_preset(args.preset)  # an unknown preset is a readable error before any training
+    try:  # an unknown preset, or one that does not co-design, is a readable error before any training
+        algorithm = get_preset(args.preset).algorithm
+    except KeyError as exc:
+        raise SystemExit(f"modsat bench codesign: {exc.args[0]}") from None
+    if algorithm != "diffsim-codesign":
+        raise SystemExit(f"modsat bench codesign: preset {args.preset!r} is {algorithm}, not diffsim-codesign")
     for name in ("designs", "slews"):
         if getattr(args, name) < 1:
             raise SystemExit(f"modsat bench codesign: --{name} must be at least 1")

@@ -16,14 +16,13 @@ object.
 from __future__ import annotations
 
 import json
-import time
 from typing import Any
 
 import numpy as np
 import torch
 
 from modsat_core.agent.policy_file import load_policy
-from modsat_core.bench.learners import _cpu_model
+from modsat_core.bench.learners import _cpu_model, timed_train
 from modsat_core.grid import ACTUATOR, EMPTY
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.pd import PDController
@@ -65,7 +64,6 @@ def ga_row(spec: JobSpec, seed: int, cmp_seed: int, slews: int) -> dict[str, Any
     """The GA (``ga.inner`` diffsim, ``ga.fitness`` objective) on ``spec``'s objective and budget:
     its best design flown by its own controller on the comparison slews, and its wall time."""
     from modsat_core.agent.policy import controller_for
-    from modsat_core.training.train import train
 
     d = spec.model_dump(mode="json")
     step = d["diffsim"]["batch_size"] * d["diffsim"]["window_steps"]
@@ -77,10 +75,7 @@ def ga_row(spec: JobSpec, seed: int, cmp_seed: int, slews: int) -> dict[str, Any
         steps_per_design=GA_UPDATES_PER_DESIGN * step,
     )
     d["training"].update(eval_every_steps=GA_UPDATES_PER_DESIGN * step)
-    ga_spec = parse_spec(d)
-    t0 = time.monotonic()
-    files = train(ga_spec).artifacts()
-    wall = time.monotonic() - t0
+    files, _train_s, wall = timed_train(parse_spec(d))
     policy, grid, ga_spec = load_policy(files["policy.pt"])
     assert grid is not None
     controller = controller_for(policy.double(), grid, ga_spec)
@@ -96,21 +91,11 @@ def ga_row(spec: JobSpec, seed: int, cmp_seed: int, slews: int) -> dict[str, Any
 
 
 def bench_codesign(preset: str, seed: int, designs: int, slews: int) -> dict[str, Any]:
-    from modsat_core.training.train import train
-
     torch.set_num_threads(1)
     d = get_preset(preset).model_dump(mode="json")
     d["seed"] = seed
     spec = parse_spec(d)
-    t0 = time.monotonic()
-    ended: list[float] = []
-
-    def progress(p: dict) -> None:
-        if p.get("phase") == "evaluating" and not ended:
-            ended.append(time.monotonic() - t0)
-
-    files = train(spec, on_progress=progress).artifacts()
-    wall = time.monotonic() - t0
+    files, train_s, wall = timed_train(spec)
     policy, kept, spec = load_policy(files["policy.pt"])
     assert kept is not None
     ev = json.loads(files["evaluation.json"])
@@ -127,7 +112,7 @@ def bench_codesign(preset: str, seed: int, designs: int, slews: int) -> dict[str
     return {
         "preset": preset,
         "seed": seed,
-        "train_s": round(ended[0], 1) if ended else None,
+        "train_s": round(train_s, 1),
         "wall_s": round(wall, 1),
         "slews": slews,
         "objective_s": {

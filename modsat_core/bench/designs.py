@@ -12,7 +12,6 @@ slew landed, the median settling time and the safety violations.
 from __future__ import annotations
 
 import json
-import time
 from typing import Any
 
 import numpy as np
@@ -20,7 +19,7 @@ import torch
 
 from modsat_core.agent.policy import controller_for
 from modsat_core.agent.policy_file import load_policy
-from modsat_core.bench.learners import _cpu_model
+from modsat_core.bench.learners import _cpu_model, timed_train
 from modsat_core.evaluation.monte_carlo import monte_carlo
 from modsat_core.grid import random_valid_design
 from modsat_core.sim.gym_envs import reference_design
@@ -83,18 +82,9 @@ def fly_designs(spec: JobSpec, controller, grids: list[np.ndarray], slews: int) 
 
 def bench_designs(seed: int, updates: int, pool: int, designs: int, slews: int, grid_size: int = 3) -> dict:
     """Train (see :func:`designs_spec`) and fly the held-out designs (module docstring)."""
-    from modsat_core.training.train import train
-
     torch.set_num_threads(1)
     spec = designs_spec(seed, updates, pool, grid_size)
-    t0 = time.monotonic()
-    ended: list[float] = []
-
-    def progress(p: dict) -> None:
-        if p.get("phase") == "evaluating" and not ended:
-            ended.append(time.monotonic() - t0)
-
-    files = train(spec, on_progress=progress).artifacts()
+    files, train_s, _wall = timed_train(spec)
     actor, grid, spec = load_policy(files["policy.pt"])
     assert grid is not None  # a diffsim-control run flies its fixed design
     from modsat_core.training.diffsim import DiffsimRun
@@ -107,7 +97,7 @@ def bench_designs(seed: int, updates: int, pool: int, designs: int, slews: int, 
         "grid_size": grid_size,
         "updates": updates,
         "design_pool": pool,
-        "train_s": round(ended[0], 1) if ended else None,
+        "train_s": round(train_s, 1),
         "held_out_designs": designs,
         "slews_per_design": slews,
         "diffsim": fly_designs(spec, controller_for(actor, grid, spec), grids, slews),

@@ -78,8 +78,9 @@ def _row(learner: str, design: str, seed: int | None, train_s: float | None, s: 
     }
 
 
-def diffsim_row(design: str, spec: JobSpec) -> tuple[dict, dict]:
-    """A diffsim row of ``spec`` (see :func:`_spec`) and the PD summary on the same slews."""
+def timed_train(spec: JobSpec) -> tuple[dict[str, bytes], float, float]:
+    """Train ``spec``: its files, the seconds from its start to the start of its final evaluation
+    (``train_s``, the curve's points included), and the whole wall time."""
     from modsat_core.training.train import train
 
     t0 = time.monotonic()
@@ -89,10 +90,17 @@ def diffsim_row(design: str, spec: JobSpec) -> tuple[dict, dict]:
         if p.get("phase") == "evaluating" and not ended:
             ended.append(time.monotonic() - t0)
 
-    res = train(spec, on_progress=progress)
-    ev = json.loads(res.artifacts()["evaluation.json"])
+    files = train(spec, on_progress=progress).artifacts()
+    wall = time.monotonic() - t0
+    return files, (ended[0] if ended else wall), wall
+
+
+def diffsim_row(design: str, spec: JobSpec) -> tuple[dict, dict]:
+    """A diffsim row of ``spec`` (see :func:`_spec`) and the PD summary on the same slews."""
+    files, train_s, _wall = timed_train(spec)
+    ev = json.loads(files["evaluation.json"])
     pd = ev["pd_baseline"]["summary"]
-    return _row("diffsim", design, spec.seed, ended[0], ev["policy"]["summary"], pd), pd
+    return _row("diffsim", design, spec.seed, train_s, ev["policy"]["summary"], pd), pd
 
 
 def td3_row(design: str, spec: JobSpec, wall_s: float, pd: dict) -> dict:

@@ -113,6 +113,14 @@ def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     assert r.returncode != 0 and "td3-codesign" in r.stderr
     r = modsat("bench", "learners", "--seeds", "0", "-1", "--no-td3")
     assert r.returncode == 2 and "seed: -1 is out of range" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "designs", "--pool", "0")
+    assert r.returncode != 0 and "--pool must be at least 1" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "designs", "--seed", "-1", "--updates", "1")
+    assert r.returncode == 2 and "seed: -1 is out of range" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "codesign", "--preset", "quick")
+    assert r.returncode != 0 and "not diffsim-codesign" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "codesign", "--preset", "nope")
+    assert r.returncode != 0 and "unknown preset 'nope'" in r.stderr and "Traceback" not in r.stderr
     out = str(tmp_path / "study")
     r = modsat("study", "--preset", "quick-td3", "--seeds", "0", "--algorithms", "diffsim-control", "--out", out)
     assert r.returncode == 2 and "design.fixed_design" in r.stderr and "Traceback" not in r.stderr
