@@ -6,7 +6,8 @@ one design. Its inputs, all of the whole satellite (19 numbers, float32):
     q_BT (4, w >= 0), omega_B / rate_limit (3), h_tot_B / (K tau_max) (3),
     tanh(30 q_v) (3), tanh(300 q_v) (3), tanh(50 omega_B / (rad/s)) (3)
 
-and, for a controller that flies many designs (``diffsim.design_pool`` > 0), 6 more of the design:
+and, for a controller that flies many designs (``diffsim.design_pool`` > 0, `diffsim-codesign`),
+6 more of the design:
 
     log(K tau_max / I_ii) (3: the torque-to-inertia ratio of each body axis, 1/s^2),
     I_ij / trace(I) (3: xy, xz, yz, the products of inertia)

@@ -19,6 +19,10 @@ the tolerance cone and to rest where the linear terms are flat; the window's las
 steps per control step; the control interval is the mission's); the curve and the final
 evaluation fly the mission's own physics.
 
+The controller is the design's PD law plus the network's correction (``diffsim.base`` `pd`, the
+default; the gradient flows through the PD law too) or the network alone (`none`); with
+``diffsim.design_pool`` its training slews fly random designs too (:meth:`DiffsimRun.initial_pool`).
+
 The budget (``training.total_env_steps``) counts control steps flown in training: one update is
 ``batch_size * window_steps`` of them. docs/diffsim.md has the settings and the measurements.
 """
