@@ -20,6 +20,7 @@ from .deps import SettingsDep, StoreDep, WriteAccess
 from .schemas import (
     ArtifactInfo,
     CancelResult,
+    Digits,
     JobDetail,
     JobId,
     JobList,
@@ -130,10 +131,11 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
 def list_jobs(
     store: StoreDep,
     status: Annotated[list[JobStatus] | None, Query(description="Only jobs in these states (repeatable).")] = None,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
+    limit: Annotated[int, Digits, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Digits, Query(ge=0, le=1_000_000_000)] = 0,
     before_id: Annotated[
         int | None,
+        Digits,
         Query(
             ge=1,
             le=2**63 - 1,
@@ -169,8 +171,8 @@ def get_job(job_id: JobId, store: StoreDep) -> JobDetail:
 def get_metrics(
     job_id: JobId,
     store: StoreDep,
-    after: Annotated[int, Query(ge=0, le=2**31 - 1, description="Only rows with seq > after.")] = 0,
-    limit: Annotated[int, Query(ge=1, le=5000)] = 1000,
+    after: Annotated[int, Digits, Query(ge=0, le=2**31 - 1, description="Only rows with seq > after.")] = 0,
+    limit: Annotated[int, Digits, Query(ge=1, le=5000)] = 1000,
 ) -> MetricsPage:
     """Progress rows in order; poll with `after` = the `last_seq` of the previous answer."""
     state = store.job_state(job_id)
@@ -202,7 +204,7 @@ async def job_events(
     request: Request,
     store: StoreDep,
     settings: SettingsDep,
-    after: Annotated[int, Query(ge=0, le=2**31 - 1, description="Start after this metrics seq.")] = 0,
+    after: Annotated[int, Digits, Query(ge=0, le=2**31 - 1, description="Start after this metrics seq.")] = 0,
     last_event_id: Annotated[str | None, Header(include_in_schema=False)] = None,
 ) -> StreamingResponse:
     """A server-sent-events stream: `metrics` events (id = seq), `status` events when the

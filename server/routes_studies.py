@@ -30,7 +30,7 @@ from modsat_core.spec.study import (
 from worker.db import QueueFull
 
 from .deps import SettingsDep, StoreDep, WriteAccess
-from .schemas import JobStatus, StudyId, _time
+from .schemas import Digits, JobStatus, StudyId, _time
 from .submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
@@ -273,8 +273,8 @@ def _detail(store, study_id: int) -> StudyDetail | None:
 @router.get("", response_model=StudyList)
 def list_studies(
     store: StoreDep,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0, le=1_000_000_000)] = 0,
+    limit: Annotated[int, Digits, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Digits, Query(ge=0, le=1_000_000_000)] = 0,
 ) -> StudyList:
     """Studies, newest first, with their jobs counted per status."""
     total, rows = store.list_studies(limit=limit, offset=offset)

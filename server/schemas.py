@@ -17,15 +17,17 @@ JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
 
 def _digits(value: Any) -> Any:
-    """An id in a path is written in digits: ``1.0``, ``1e0`` or ``+1`` name no job (pydantic's
-    lax mode would read them as 1)."""
+    """An id in a path, or a count in a query, is written in digits: ``1.0``, ``1e0`` or ``+1``
+    are refused (pydantic's lax mode would read them as 1)."""
     if isinstance(value, str) and not re.fullmatch(r"-?[0-9]+", value):
-        raise ValueError("an id is a whole number written in digits, e.g. 12")
+        raise ValueError("a whole number written in digits, e.g. 12")
     return value
 
 
-JobId = Annotated[int, BeforeValidator(_digits), Path(description="The job's id.")]
-StudyId = Annotated[int, BeforeValidator(_digits), Path(description="The study's id.")]
+#: For an integer in a path or a query: digits only (:func:`_digits`).
+Digits = BeforeValidator(_digits)
+JobId = Annotated[int, Digits, Path(description="The job's id.")]
+StudyId = Annotated[int, Digits, Path(description="The study's id.")]
 
 
 def clip(text: str, limit: int = 100) -> str:

@@ -338,6 +338,16 @@ def test_ids_are_integers_written_as_integers(api, path):
     assert api.client.get(path.format(-1)).status_code == 404 and api.client.get(path.format(2**70)).status_code == 404
 
 
+def test_counts_and_cursors_in_a_query_are_digits_too(api):
+    """`?limit=1.0` or `?before_id=1e0` are not read as 1: a 422 naming the parameter."""
+    for query, name in (("limit=1.0", "limit"), ("offset=1e0", "offset"), ("before_id=%2B5", "before_id")):
+        r = api.client.get(f"/api/jobs?{query}")
+        assert r.status_code == 422 and name in r.json()["messages"][0], (query, r.text)
+    r = api.client.get("/api/studies?limit=2.0")
+    assert r.status_code == 422 and "limit" in r.json()["messages"][0], r.text
+    assert api.client.get("/api/jobs?limit=2&offset=0").status_code == 200
+
+
 def test_openapi_lists_every_status_an_operation_answers(api):
     """A client generated from the schema knows each answer: the middleware's (400 Host, 403
     Origin, 413 body size, 503 database) and the routes' own (415, 429, ...)."""
