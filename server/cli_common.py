@@ -1,0 +1,91 @@
+"""What the ``modsat`` commands share: the log line, a benchmark's report, torch's threads, a spec
+from ``--preset`` or a file, and the service's limits. server/cli.py, server/cli_bench.py and
+server/cli_run.py import it; it imports none of them."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+
+def log(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def print_report(report: dict | list, path: str | None) -> None:
+    """A benchmark's JSON report on stdout and, if ``path``, in that file."""
+    text = json.dumps(report, indent=2)
+    if path:
+        with open(path, "w") as fh:
+            fh.write(text + "\n")
+    print(text)
+
+
+def set_threads(n: int | None) -> None:
+    """Torch threads of this process: ``--threads``, else MODSAT_TORCH_THREADS, else 1 (on a busy
+    machine torch's default of one per core measured about 20x slower)."""
+
+    if n is None:
+        raw = os.environ.get("MODSAT_TORCH_THREADS", "").strip() or "1"
+        if not raw.isdigit() or not 1 <= int(raw) <= 256:
+            raise SystemExit(f"modsat: MODSAT_TORCH_THREADS must be a number from 1 to 256; got {raw!r}")
+        n = int(raw)
+    if not 1 <= n <= 256:
+        raise SystemExit(f"modsat: --threads must be from 1 to 256; got {n}")
+    import torch
+
+    torch.set_num_threads(n)
+
+
+def load_spec(args: argparse.Namespace):
+    from modsat_core.spec.jobspec import parse_spec
+    from modsat_core.spec.presets import get_preset
+
+    if (args.preset is None) == (args.spec is None):
+        raise SystemExit("modsat train: give either --preset NAME or a SPEC.json file")
+    if args.preset is not None:
+        spec = get_preset(args.preset)
+    else:
+        with open(args.spec, "rb") as fh:
+            spec = parse_spec(fh.read())
+    updates = {}
+    if args.steps is not None:
+        updates["total_env_steps"] = args.steps
+    if args.device is not None:
+        updates["device"] = args.device
+    if getattr(args, "hidden", None):
+        updates["hidden_sizes"] = args.hidden
+    if updates:
+        spec = spec.model_copy(update={"training": spec.training.model_copy(update=updates)})
+    if args.seed is not None:
+        spec = spec.model_copy(update={"seed": args.seed})
+    return parse_spec(spec.model_dump_json())  # re-validated after the overrides
+
+
+def _limits():
+    """The per-job limits of the MODSAT_* settings (the service's; docs/service.md, "Limits")."""
+    from pydantic import ValidationError
+
+    from worker.settings import WorkerSettings
+
+    try:
+        return WorkerSettings().limits()
+    except ValidationError as exc:
+        raise SystemExit(
+            f"modsat: bad MODSAT_* setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}"
+        ) from None
+
+
+def check_limits(spec, command: str) -> None:
+    from modsat_core.spec.limits import check
+
+    problems = check(spec, _limits())
+    if problems:
+        print(
+            f"modsat {command}: this spec is over the limits (raise them with the MODSAT_* variables named if "
+            "this machine can take it):\n  " + "\n  ".join(m for _, m in problems),
+            file=sys.stderr,
+        )
+        raise SystemExit(2)
