@@ -84,9 +84,10 @@ _QUICK_MISSION = {
 
 #: The first-order co-design presets' objective (`objective`; docs/diffsim.md, "Co-design"): a
 #: payload plate of structure modules under the design (the k = 0 layer), a module worth 0.05 s of
-#: slew time and a wheel unit 0.5 s more, and wheels of 0.05 N m (the paper's 3x3x3 has 0.8), so
-#: that the torque a design carries decides how fast it slews.
-DIFFSIM_CODESIGN_TAU_NM = 0.05
+#: slew time and a wheel unit 0.5 s more, and small wheels (0.05 N m on 3x3x3, where the paper's
+#: have 0.8; 0.2 N m on 5x5x5, where they have 1.5), so that the torque a design carries decides
+#: how fast it slews.
+DIFFSIM_CODESIGN_TAU_NM = {3: 0.05, 5: 0.2}
 
 
 def _diffsim_codesign(n: int, updates: int) -> JobSpec:
@@ -96,7 +97,7 @@ def _diffsim_codesign(n: int, updates: int) -> JobSpec:
             "name": f"diffsim-{n}x{n}x{n}",
             "algorithm": "diffsim-codesign",
             "design": {"grid_size": n},
-            "modules": {"torque_scale_Nm": DIFFSIM_CODESIGN_TAU_NM, "actuator_model": "reaction-wheel"},
+            "modules": {"torque_scale_Nm": DIFFSIM_CODESIGN_TAU_NM[n], "actuator_model": "reaction-wheel"},
             "mission": {"reward": _HOLD_REWARD},
             "objective": {
                 "module_price_s": 0.05,
@@ -183,6 +184,7 @@ PRESETS: dict[str, JobSpec] = {
     # kept on validation slews (docs/learning.md, "The shipped recipe" and "Status").
     # Co-design by the first-order learner on a priced objective (docs/diffsim.md, "Co-design").
     "diffsim-3x3x3": _diffsim_codesign(3, 240),
+    "diffsim-5x5x5": _diffsim_codesign(5, 240),
     "cpu-3x3x3": JobSpec.model_validate(
         {
             "name": "cpu-3x3x3",

@@ -235,6 +235,7 @@ def test_openapi_declares_the_bearer_token_only_when_one_is_set(api, start_serve
         "quick",
         "quick-td3",
         "diffsim-3x3x3",
+        "diffsim-5x5x5",
         "cpu-3x3x3",
     ]
     s = start_server(sqlite_url, env={"MODSAT_API_TOKEN": "s3cret"})
