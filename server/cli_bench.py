@@ -4,11 +4,10 @@ handlers and their parsers (wired into server/cli.py by ``add_bench_parsers``)."
 from __future__ import annotations
 
 import argparse
-import errno
 import json
 import os
 
-from .cli_common import load_spec, log, print_report, set_threads
+from .cli_common import load_spec, log, prepare_report_path, print_report, set_threads
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -89,10 +88,7 @@ def _cmd_bench_control(args: argparse.Namespace) -> int:
     if args.eval_every < 1:
         raise SystemExit("modsat bench control: --eval-every must be at least 1")
     spec = load_spec(args)
-    if args.out:  # before the training, not after
-        if os.path.isdir(args.out):
-            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    prepare_report_path(args.out)  # before the training, not after
     report = bench_control(spec, eval_every=args.eval_every, eval_target=args.eval_target, log=log)
     print_report(report, args.out)
     return 0
@@ -105,10 +101,7 @@ def _cmd_bench_designs(args: argparse.Namespace) -> int:
     for name in ("updates", "pool", "designs", "slews"):
         if getattr(args, name) < 1:
             raise SystemExit(f"modsat bench designs: --{name} must be at least 1")
-    if args.out:
-        if os.path.isdir(args.out):
-            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    prepare_report_path(args.out)
     report = bench_designs(args.seed, args.updates, args.pool, args.designs, args.slews, args.grid_size)
     print_report(report, args.out)
     return 0
@@ -128,10 +121,7 @@ def _cmd_bench_codesign(args: argparse.Namespace) -> int:
     for name in ("designs", "slews"):
         if getattr(args, name) < 1:
             raise SystemExit(f"modsat bench codesign: --{name} must be at least 1")
-    if args.out:
-        if os.path.isdir(args.out):
-            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    prepare_report_path(args.out)
     print_report(bench_codesign(args.preset, args.seed, args.designs, args.slews), args.out)
     return 0
 
@@ -146,10 +136,7 @@ def _cmd_bench_learners(args: argparse.Namespace) -> int:
     steps = DIFFSIM_STEPS if args.steps is None else args.steps
     if steps < 1:
         raise SystemExit("modsat bench learners: --steps must be at least 1")
-    if args.out:
-        if os.path.isdir(args.out):
-            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", args.out)
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    prepare_report_path(args.out)
     rows = bench_learners(args.seeds, args.designs, steps, td3=not args.no_td3, log=lambda r: log(json.dumps(r)))
     if args.json:
         print_report(rows, args.out)

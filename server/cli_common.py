@@ -5,6 +5,7 @@ server/cli_run.py import it; it imports none of them."""
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
 import sys
@@ -12,6 +13,14 @@ import sys
 
 def log(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
+
+
+def prepare_report_path(path: str | None) -> None:
+    """Check ``--out`` names a file (not a folder) and make its folder, before any training runs."""
+    if path:
+        if os.path.isdir(path):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory (--out names the report file)", path)
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
 
 
 def print_report(report: dict | list, path: str | None) -> None:
