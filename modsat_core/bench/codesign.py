@@ -38,8 +38,7 @@ def random_designs(spec: JobSpec, n: int, seed: int) -> list[np.ndarray]:
     N = spec.design.grid_size
     out: list[np.ndarray] = []
     while len(out) < n:
-        raw = np.where(fixed, types, rng.integers(0, 3, size=(1, N, N, N)))
-        g = satellites(raw, fixed)[0]
+        g = satellites(rng.integers(0, 3, size=(1, N, N, N)), fixed, types)[0]
         if (g == ACTUATOR).any():
             out.append(g)
     return out

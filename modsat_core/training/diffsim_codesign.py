@@ -71,9 +71,10 @@ def fixed_cells(spec: JobSpec) -> tuple[np.ndarray, np.ndarray]:
     return mask, types
 
 
-def satellites(raw: np.ndarray, fixed: np.ndarray) -> np.ndarray:
-    """(M, N, N, N) drawn grids -> the satellites they make: the modules face-connected to the
-    fixed cells (which every draw has)."""
+def satellites(raw: np.ndarray, fixed: np.ndarray, types: np.ndarray) -> np.ndarray:
+    """(M, N, N, N) drawn grids -> the satellites they make: the fixed cells given their types
+    (:func:`fixed_cells`), then the modules face-connected to them."""
+    raw = np.where(fixed, types, raw)
     filled = raw != EMPTY
     reached = flood_fill(np.broadcast_to(fixed, raw.shape) & filled, filled)
     return np.where(reached, raw, EMPTY).astype(np.int64)
@@ -146,12 +147,12 @@ class DiffsimCodesignRun(DiffsimRun):
         u = self.design_rng.random((M, N**3, 1))
         raw = (u > np.cumsum(p, axis=-1)[None, :, :2]).sum(-1).reshape(M, N, N, N)
         raw = np.where(self.fixed, self.fixed_types, raw)
-        return satellites(raw, self.fixed), raw
+        return satellites(raw, self.fixed, self.fixed_types), raw
 
     def mode(self) -> np.ndarray:
         N = self.spec.design.grid_size
         raw = self.probabilities().argmax(-1).reshape(1, N, N, N)
-        return satellites(np.where(self.fixed, self.fixed_types, raw), self.fixed)[0]
+        return satellites(raw, self.fixed, self.fixed_types)[0]
 
     def log_prob(self, raw: np.ndarray) -> torch.Tensor:
         """(M,) log-probability of each raw grid under the logits (the fixed cells excluded)."""

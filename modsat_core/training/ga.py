@@ -128,7 +128,7 @@ class GARun:
         if not self.spec.objective.payload_cells:
             return grid
         fixed, types = fixed_cells(self.spec)
-        return satellites(np.where(fixed, types, grid)[None], fixed)[0]
+        return satellites(grid[None], fixed, types)[0]
 
     def _next_generation(self) -> None:
         n_surv, frac = survivor_count(self.spec, self.used)

@@ -62,7 +62,7 @@ def test_draws_keep_the_payload_and_only_what_is_connected_to_it():
     lone = np.zeros((1, 2, 2, 2), dtype=np.int64)
     lone[0, 0, 0, :] = STRUCTURE
     lone[0, 1, 1, 1] = ACTUATOR
-    assert satellites(lone, run.fixed)[0, 1, 1, 1] == EMPTY
+    assert satellites(lone, run.fixed, run.fixed_types)[0, 1, 1, 1] == EMPTY
     # the log-probability counts the free cells only, under the uniform start
     assert torch.allclose(run.log_prob(raw), torch.full((64,), 6 * np.log(1 / 3), dtype=torch.float64))
 
