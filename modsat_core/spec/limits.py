@@ -97,10 +97,14 @@ class Estimate:
     evaluation_bytes: int
     train_env_steps: int
     evaluation_steps: int
+    #: `diffsim-codesign`: the largest batch of designs flown at once (a design update's draws x
+    #: slews, or the kept design's candidates on the validation slews).
+    design_bytes: int = 0
 
     @property
     def memory_bytes(self) -> int:
-        return BASE_BYTES + self.replay_bytes + self.update_bytes + max(self.step_bytes, self.evaluation_bytes)
+        flights = max(self.step_bytes, self.evaluation_bytes, self.design_bytes)
+        return BASE_BYTES + self.replay_bytes + self.update_bytes + flights
 
     def as_dict(self) -> dict:
         return {
@@ -109,6 +113,7 @@ class Estimate:
             "update_bytes": self.update_bytes,
             "step_bytes": self.step_bytes,
             "evaluation_bytes": self.evaluation_bytes,
+            "design_bytes": self.design_bytes,
             "train_env_steps": self.train_env_steps,
             "evaluation_steps": self.evaluation_steps,
         }
@@ -136,7 +141,15 @@ def estimate(spec: JobSpec) -> Estimate:
         units = spec.design.grid_size**3 if d.design_pool or fixed is None else sum(c == 2 for c in _cells(fixed))
         per_substep = DIFFSIM_BYTES_PER_SUBSTEP + units * DIFFSIM_BYTES_PER_UNIT_SUBSTEP
         window = d.batch_size * d.window_steps * (substeps * per_substep + DIFFSIM_BYTES_PER_STEP)
+        design = 0
+        if spec.algorithm == "diffsim-codesign":
+            # A flight without a graph keeps one step's tensors a slew: at most what the window keeps
+            # of an RK4 step, twice over for float64 (the validation slews of the kept design's
+            # candidates, at most 1 + TOP_DRAWS = 4 of them).
+            flights = max(d.design_batch * d.design_slews, 4 * e.episodes)
+            design = 2 * per_substep * flights
         return Estimate(
+            design_bytes=design,
             replay_bytes=0,
             update_bytes=window,
             step_bytes=0,
@@ -178,7 +191,12 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
     out: list[tuple[tuple[str, ...], str]] = []
     if limits.max_memory_bytes is not None and est.memory_bytes > limits.max_memory_bytes and est.replay_bytes == 0:
         d = spec.diffsim
-        loc = ("diffsim", "batch_size") if est.update_bytes >= est.evaluation_bytes else ("evaluation", "episodes")
+        sizes = {
+            ("diffsim", "batch_size"): est.update_bytes,
+            ("diffsim", "design_batch"): est.design_bytes,
+            ("evaluation", "episodes"): est.evaluation_bytes,
+        }
+        loc = max(sizes, key=lambda k: sizes[k])
         out.append(
             (
                 loc,
@@ -186,7 +204,8 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
                     f"{'.'.join(loc)}: this run would need about {_gib(est.memory_bytes)} of memory, more than this "
                     f"service allows ({_gib(limits.max_memory_bytes)}, MODSAT_MAX_JOB_MEMORY_GIB): one gradient "
                     f"window {_gib(est.update_bytes)} ({d.batch_size} slews x {d.window_steps} steps), evaluation "
-                    f"{_gib(est.evaluation_bytes)}; lower {'.'.join(loc)}"
+                    f"{_gib(est.evaluation_bytes)}, designs flown at once {_gib(est.design_bytes)}; "
+                    f"lower {'.'.join(loc)}"
                 ),
             )
         )

@@ -67,3 +67,18 @@ def test_check_cli_is_readable(tmp_path):
     ok = tmp_path / "ok.json"
     ok.write_text(get_preset("quick-td3").model_dump_json())
     assert main(["check", str(ok)]) == 0
+
+
+def test_codesign_counts_the_designs_it_flies_at_once():
+    """`diffsim-codesign` flies design_batch x design_slews slews at once: too many for the
+    service's memory is refused naming `diffsim.design_batch`, not left to run out of memory."""
+    d = get_preset("diffsim-3x3x3").model_dump(mode="json")
+    assert limits.check(parse_spec(d), limits.Limits()) == []
+    est = limits.estimate(parse_spec(d))
+    assert est.design_bytes > 0 and est.memory_bytes >= limits.BASE_BYTES + est.update_bytes + est.design_bytes
+    d["design"]["grid_size"] = 10
+    d["objective"]["payload_cells"] = [[0, 0, 0]]
+    d["diffsim"].update(design_batch=4096, design_slews=1000)
+    problems = limits.check(parse_spec(d), limits.Limits())
+    assert problems and problems[0][0] == ("diffsim", "design_batch"), problems
+    assert "designs flown at once" in problems[0][1]
