@@ -231,8 +231,19 @@ class ControllerEvaluation(Record):
     episodes: list[EpisodeMetrics] = Field(default_factory=list)
 
 
+class ConditionEvaluation(Record):
+    """One flight condition of the evaluation (docs/robustness.md): the policy and PD on the same
+    slews under it."""
+
+    name: str
+    changes: dict[str, float | int | None] = Field(description="What departs from the nominal flight.")
+    policy: EvaluationSummary
+    pd_baseline: EvaluationSummary
+
+
 class EvaluationReport(Record):
-    """``evaluation.json``: the policy and the PD baseline on the same seeded slews."""
+    """``evaluation.json``: the policy and the PD baseline on the same seeded slews, nominal and under
+    each of ``evaluation.conditions``."""
 
     FILE: ClassVar[str] = "evaluation.json"
     episodes: int
@@ -240,6 +251,9 @@ class EvaluationReport(Record):
     design_valid: bool
     policy: ControllerEvaluation
     pd_baseline: ControllerEvaluation | None = Field(description="null when the design is not a valid satellite.")
+    conditions: list[ConditionEvaluation] = Field(
+        default_factory=list, description="Empty for runs written before conditions were evaluated."
+    )
 
 
 class Trajectory(Record):
@@ -309,3 +323,28 @@ class RunSummary(Record):
     pd_baseline: EvaluationSummary | None = None
     design: DesignFigures | None = None
     designs_evaluated: int | None = Field(None, description="GA: designs evaluated.")
+    conditions: list[ConditionEvaluation] = Field(
+        default_factory=list, description="The policy and PD under each flight condition (docs/robustness.md)."
+    )
+
+
+def conditions_table(
+    nominal: tuple[EvaluationSummary | None, EvaluationSummary | None], conditions: list[ConditionEvaluation]
+) -> list[list[str]]:
+    """Rows of the robustness table (header first): per condition, success (the mission's), safety
+    violations and median settling time of the policy and of PD, nominal first."""
+
+    def cells(s: EvaluationSummary | None) -> list[str]:
+        if s is None:
+            return ["-", "-", "-"]
+        rate, settle = s.success_rate, s.median_settling_time_s
+        return [
+            f"{100 * rate:.0f}%",
+            "-" if s.safety_violations is None else str(s.safety_violations),
+            "-" if settle is None else f"{settle:.2f}",
+        ]
+
+    rows = [["condition", "policy success", "viol", "settle s", "PD success", "viol", "settle s"]]
+    rows.append(["nominal", *cells(nominal[0]), *cells(nominal[1])])
+    rows += [[c.name, *cells(c.policy), *cells(c.pd_baseline)] for c in conditions]
+    return rows

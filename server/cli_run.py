@@ -193,6 +193,33 @@ def _print_evaluation(summary: dict, stream) -> None:
             f"{'-' if ratio is None else f'{ratio:.2f}':>10}",
             file=stream,
         )
+    if s.conditions:
+        from modsat_core.artefacts import conditions_table
+
+        rows = conditions_table((s.policy, s.pd_baseline), s.conditions)
+        print("flight conditions (docs/robustness.md), the same slews:", file=stream)
+        widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        for r in rows:
+            line = "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+            print("  " + line, file=stream)
+
+
+def _conditions_arg(text: str) -> list:
+    """``--conditions``: `all` (the standard ones), `none`, names separated by commas, or a JSON
+    file holding a list of conditions (objects or standard names)."""
+    from modsat_core.spec.evaluation import STANDARD_CONDITIONS
+
+    if text == "all":
+        return list(STANDARD_CONDITIONS)
+    if text == "none":
+        return []
+    if text.endswith(".json"):
+        with open(text, encoding="utf-8") as fh:
+            items = json.load(fh)
+        if not isinstance(items, list):
+            raise ValueError(f"{text} must hold a JSON list of conditions")
+        return items
+    return [name.strip() for name in text.split(",") if name.strip()]
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
@@ -206,6 +233,14 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     if grid is None:
         print("modsat: this policy has no design", file=sys.stderr)
         return 2
+    if args.conditions is not None:
+        try:
+            conditions = _conditions_arg(args.conditions)
+            evaluation = spec.evaluation.model_validate({**spec.evaluation.model_dump(), "conditions": conditions})
+        except (ValueError, OSError) as exc:
+            print(f"modsat eval: --conditions: {exc}", file=sys.stderr)
+            return 2
+        spec = spec.model_copy(update={"evaluation": evaluation})
     ev = final_evaluation(actor, grid, spec, episodes=args.episodes)
     ev.pop("trajectories")
     if args.json:
@@ -291,6 +326,13 @@ def add_run_parsers(sub) -> None:
     ev = sub.add_parser("eval", help="Monte-Carlo evaluation of a trained run (policy and PD baseline)")
     ev.add_argument("run_dir", help="a directory written by `modsat train`")
     ev.add_argument("--episodes", type=int, help="number of seeded slews (default: the spec's)")
+    ev.add_argument(
+        "--conditions",
+        metavar="LIST",
+        help="flight conditions to fly besides the nominal slews (docs/robustness.md): `all` (the standard "
+        "ones), `none`, names separated by commas (e.g. delay-1,sensor-noise), or a .json file with a list of "
+        "conditions; default: the run's evaluation.conditions",
+    )
     ev.add_argument("--json", action="store_true")
     ev.set_defaults(func=_cmd_eval)
 

@@ -35,7 +35,7 @@ import torch
 from torch import Tensor, nn
 
 from modsat_core.grid import ACTUATOR
-from modsat_core.sim.pd import PDGains, pd_gains, pd_torque
+from modsat_core.sim.pd import RATE_GAIN_MAX, PDGains, pd_gains, pd_torque
 
 if TYPE_CHECKING:
     from modsat_core.sim.dynamics import Plant
@@ -101,6 +101,9 @@ class DiffsimPolicy(nn.Module):
         sign[0] = 1.0  # q_w is even; every other input of the state is odd
         sign[N_DIFFSIM_INPUTS:] = 1.0  # the design is what it is in a mirrored state
         self.register_buffer("mirror", sign)
+        # The PD law's delay-margin cap this controller was trained on (``diffsim.base`` `pd`):
+        # policy files record it; those written before it was stated flew sim.pd's older cap.
+        self.pd_rate_gain_max = RATE_GAIN_MAX
 
     def forward(self, x: Tensor) -> Tensor:
         return torch.tanh(0.5 * (self.net(x) - self.net(x * self.mirror)))
@@ -122,7 +125,7 @@ class DiffsimController:
     def gains(self, sim: SlewSim) -> PDGains:
         """PD's gains for the sim's satellites, recomputed when its plant changes."""
         if self._gains is None or self._plant is not sim.plant:
-            self._plant, self._gains = sim.plant, pd_gains(sim)
+            self._plant, self._gains = sim.plant, pd_gains(sim, rate_gain_max=self.policy.pd_rate_gain_max)
         return self._gains
 
     def __call__(self, sim: SlewSim) -> Tensor:

@@ -134,7 +134,8 @@ def exported(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> nn.Module:
     """The standalone controller of ``actor`` flying ``grid``: ``forward(q_BT, omega_B, h_B)``."""
     if isinstance(actor, DiffsimPolicy):
         sim = SlewSim.from_designs([Design.from_grid(grid, spec.modules)], spec.mission, spec.modules)
-        pd = pd_gains(sim) if spec.diffsim.base == "pd" else None  # the design's PD law, as training flew it
+        # the design's PD law, as training flew it
+        pd = pd_gains(sim, rate_gain_max=actor.pd_rate_gain_max) if spec.diffsim.base == "pd" else None
         return ExportedDiffsimController(
             actor, grid, spec.mission.rate_limit_rad_s, spec.modules.torque_scale_Nm, sim.plant.I_B[0], pd
         )

@@ -20,6 +20,7 @@ from modsat_core.agent.diffsim_policy import (
 )
 from modsat_core.agent.networks import make_actor
 from modsat_core.codesign.features import N_FEATURES
+from modsat_core.sim.pd import RATE_GAIN_MAX_NO_DELAY_MARGIN
 from modsat_core.spec.jobspec import JobSpec, is_diffsim
 
 #: Version 2: the network is named in the file (``per-module`` or ``set``), 53 features.
@@ -82,6 +83,7 @@ def policy_bytes(actor: torch.nn.Module, grid: np.ndarray | None, spec: JobSpec)
             "hidden_sizes": hidden,
             "n_features": n_inputs,
             "actor": {k: v.detach().cpu() for k, v in actor.state_dict().items()},
+            **({"pd_rate_gain_max": actor.pd_rate_gain_max} if isinstance(actor, DiffsimPolicy) else {}),
         },
         buf,
     )
@@ -110,5 +112,8 @@ def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpe
         # Written before `diffsim.base` existed (its spec has no such key): the network alone.
         spec = spec.model_copy(update={"diffsim": spec.diffsim.model_copy(update={"base": "none"})})
     actor = actor_from_state(spec, d["actor"])
+    if isinstance(actor, DiffsimPolicy):
+        # Files written before the PD law's delay margin was stated flew the older cap.
+        actor.pd_rate_gain_max = float(d.get("pd_rate_gain_max", RATE_GAIN_MAX_NO_DELAY_MARGIN))
     grid = None if d["grid"] is None else np.asarray(d["grid"], dtype=np.int64)
     return actor, grid, spec

@@ -23,6 +23,7 @@ from torch import Tensor
 
 from modsat_core.codesign.features import CellObs, PhysState, cell_observation
 from modsat_core.grid import ACTUATOR, valid_mask
+from modsat_core.sim.conditions import Axes, Flight, RowConditions, perturb_draw, true_inertia
 from modsat_core.sim.mission import draw_episode, return_bounds
 from modsat_core.sim.morphology import (
     mass_properties_batched,
@@ -111,11 +112,16 @@ class CoDesignEnv:
         self.grids = torch.zeros(num_envs, self.N, self.N, self.N, dtype=torch.long, device=self.device)
         self.design_step = torch.zeros(num_envs, dtype=torch.long, device=self.device)
         self.ep_return = torch.zeros(num_envs, device=self.device)
+        # Domain randomisation (the `randomise` section): the flight between the actor and the sim,
+        # its conditions drawn per flight from a stream of their own.
+        self.flight = Flight(self.sim, max_delay=spec.randomise.delay_steps, seed=seed)
+        self.cond_rng = np.random.default_rng([seed, 3])
         self._reset(torch.arange(num_envs, device=self.device))
 
     # ----------------------------------------------------------------- state
     def compact(self) -> Compact:
-        st = self.sim.state
+        """The actor's observation of every env: with sensor noise (`randomise`), the measured state."""
+        st = self.flight.view().state if self.flight.noisy else self.sim.state
         return Compact(
             grid=self.grids.reshape(self.B, -1).to(torch.uint8),
             design_step=self.design_step.to(torch.int16),
@@ -146,8 +152,22 @@ class CoDesignEnv:
             return
         m = self.spec.modules
         _, _, I_B = mass_properties_batched(self.grids[idx], m.module_mass_kg, m.module_size_m, dtype=torch.float32)
-        self.sim.set_plants(idx, I_B, self.grids[idx].reshape(len(idx), -1) == ACTUATOR)
-        self.sim.reset(idx, [draw_episode(self.rngs[int(i)], self.spec.mission) for i in idx.tolist()])
+        mask = self.grids[idx].reshape(len(idx), -1) == ACTUATOR
+        draws = [draw_episode(self.rngs[int(i)], self.spec.mission) for i in idx.tolist()]
+        r = self.spec.randomise
+        if r.active:
+            n = len(idx)
+            rows, axes = RowConditions.drawn(r, self.cond_rng, n), Axes.draw(self.cond_rng, n)
+            I_model = I_B.double().cpu().numpy()
+            self.flight.set_rows(idx, rows, I_B)
+            I_B = torch.as_tensor(true_inertia(I_model, rows, axes), dtype=torch.float32, device=self.device)
+            draws = [
+                perturb_draw(d, rows.tumble_rad_s[k], rows.disturbance_Nm[k], axes.tumble[k], axes.disturbance[k])
+                for k, d in enumerate(draws)
+            ]
+        self.sim.set_plants(idx, I_B, mask)
+        self.sim.reset(idx, draws)
+        self.flight.reset_rows(idx)
 
     # ----------------------------------------------------------------- step
     def step(self, actions: Tensor) -> EnvStep:
@@ -161,7 +181,7 @@ class CoDesignEnv:
         finished: list[dict] = []
 
         if bool(flying.any()):
-            out = self.sim.step(actions)
+            out = self.sim.step(self.flight.apply(actions))  # late and weak under `randomise`
             reward = torch.where(flying, out.reward, reward)
             terminal = flying & out.terminated
             done = flying & (out.terminated | out.truncated)
@@ -218,6 +238,8 @@ class CoDesignEnv:
             "metrics": {k: v.clone() for k, v in vars(self.sim.metrics).items()},
             "rngs": [r.bit_generator.state for r in self.rngs],
             "design_rng": self.design_rng.bit_generator.state,
+            "flight": self.flight.state_dict(),
+            "cond_rng": self.cond_rng.bit_generator.state,
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -239,3 +261,6 @@ class CoDesignEnv:
         for r, s in zip(self.rngs, d["rngs"]):
             r.bit_generator.state = s
         self.design_rng.bit_generator.state = d["design_rng"]
+        if "flight" in d:  # checkpoints from before domain randomisation have none (and need none)
+            self.flight.load_state_dict(d["flight"])
+            self.cond_rng.bit_generator.state = d["cond_rng"]

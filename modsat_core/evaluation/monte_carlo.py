@@ -1,22 +1,35 @@
 """Monte-Carlo evaluation: a fixed, seeded set of slews flown in one batch.
 
 Episode ``i`` of a set with seed ``s`` is drawn from ``numpy.random.default_rng([s, i])``,
-so it is the same slew whatever the number of episodes or the controller.
+so it is the same slew whatever the number of episodes or the controller. Under flight conditions
+(:func:`monte_carlo_conditions`) episode ``i`` of every condition is that slew too (with the
+condition's slew range, the same draw of axis and angle fraction), and the random directions of
+its conditions come from ``default_rng([s, i, 3])``: the same for every condition and controller.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
 import torch
 from torch import Tensor
 
+from modsat_core.sim.conditions import (
+    Axes,
+    Flight,
+    RowConditions,
+    condition_mission_range,
+    max_delay,
+    perturb_draw,
+    true_inertia,
+)
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
+from modsat_core.spec.evaluation import Condition
 from modsat_core.spec.jobspec import Mission, ModuleCatalog
 
 Controller = Callable[[SlewSim], Tensor]  # sim -> action (B, K, 3) in [-1, 1]
@@ -101,8 +114,69 @@ def monte_carlo(
     sim = SlewSim.from_designs(designs, mission, modules, dtype=dtype, device=device)
     draws = [draw_episode(r, mission) for r in episode_rngs(seed, slews or episodes)]
     sim.reset(list(range(episodes)), [draws[i % len(draws)] for i in range(episodes)])
+    return _fly(Flight(sim), controller, mission, record)
+
+
+def monte_carlo_conditions(
+    designs: list[Design] | Design,
+    controller: Controller | Callable[[SlewSim], Controller],
+    mission: Mission,
+    modules: ModuleCatalog,
+    conditions: list[Condition],
+    *,
+    episodes: int,
+    seed: int,
+    dtype: torch.dtype = torch.float64,
+    device: str = "cpu",
+) -> dict[str, MonteCarloResult]:
+    """:func:`monte_carlo` under each of ``conditions`` (all in one batch): condition name -> result.
+
+    Row ``c * episodes + i`` flies episode ``i`` of the seed's set under condition ``c``; the
+    controller believes the design's inertia and sees measured states (:class:`Flight`)."""
+    if isinstance(designs, Design):
+        designs = [designs] * episodes
+    if len(designs) != episodes:
+        raise ValueError(f"{len(designs)} designs for {episodes} episodes")
+    if not conditions:
+        return {}
+    C = len(conditions)
+    rows = RowConditions.of(conditions).take(np.repeat(np.arange(C), episodes))
+    axes_rngs = [np.random.default_rng([seed, i, 3]) for i in range(episodes)]
+    axes = [Axes.draw(r, 1) for r in axes_rngs]
+    ax = Axes(
+        *(np.tile(np.concatenate([getattr(a, f) for a in axes]), (C, 1)) for f in ("inertia", "tumble", "disturbance"))
+    )
+    I_model = np.tile(np.stack([d.I_B for d in designs]), (C, 1, 1))
+    I_true = true_inertia(I_model, rows, ax)
+    all_designs = [replace(d, I_B=I) for d, I in zip(designs * C, I_true)]
+    sim = SlewSim.from_designs(all_designs, mission, modules, dtype=dtype, device=device)
+    draws = []
+    for c in conditions:
+        m = condition_mission_range(mission, c)
+        draws += [draw_episode(r, m) for r in episode_rngs(seed, episodes)]
+    draws = [
+        perturb_draw(d, rows.tumble_rad_s[k], rows.disturbance_Nm[k], ax.tumble[k], ax.disturbance[k])
+        for k, d in enumerate(draws)
+    ]
+    sim.reset(list(range(C * episodes)), draws)
+    flight = Flight(sim, max_delay=max_delay(conditions), seed=seed)
+    kw: dict[str, Any] = dict(dtype=sim.dtype, device=sim.device)
+    flight.set_rows(torch.arange(C * episodes), rows, torch.as_tensor(I_model, **kw))
+    mc = _fly(flight, controller, mission, 0)
+    return {
+        c.name: MonteCarloResult(episodes=mc.episodes[k * episodes : (k + 1) * episodes], trajectories=[])
+        for k, c in enumerate(conditions)
+    }
+
+
+def _fly(
+    flight: Flight, controller: Controller | Callable[[SlewSim], Controller], mission: Mission, record: int
+) -> MonteCarloResult:
+    """Fly the flight's episodes (reset) to their end with ``controller`` and collect them."""
+    sim = flight.sim
+    episodes = sim.B
     if isinstance(controller, type):
-        controller = controller(sim)
+        controller = controller(flight.view())
     done = torch.zeros(episodes, dtype=torch.bool, device=sim.device)
     final: dict[str, Tensor] = {}
     rec = min(record, episodes)
@@ -121,7 +195,7 @@ def monte_carlo(
         snapshot(torch.zeros(episodes, 3, dtype=sim.dtype, device=sim.device))
     for _ in range(mission.episode_steps):
         with torch.no_grad():
-            action = cast(Tensor, controller(sim))  # a Controller once a class was instantiated above
+            action = flight.act(cast(Controller, controller))  # a Controller once a class was instantiated
         out = sim.step(action)
         if rec:
             snapshot(out.tau_c_B)

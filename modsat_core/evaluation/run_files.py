@@ -16,11 +16,12 @@ from modsat_core.agent.policy import controller_for
 from modsat_core.agent.policy_file import policy_bytes
 from modsat_core.artefacts import CurveFile, CurvePoint, DesignReport, EvaluationReport, RunSummary, Trajectories
 from modsat_core.codesign.mdp import effective_invalid_penalty
-from modsat_core.evaluation.monte_carlo import monte_carlo
+from modsat_core.evaluation.monte_carlo import monte_carlo, monte_carlo_conditions
 from modsat_core.grid import ACTUATOR, EMPTY, is_valid
 from modsat_core.sim.morphology import mass_properties
 from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design
+from modsat_core.spec.evaluation import Condition
 from modsat_core.spec.jobspec import JobSpec
 
 #: Final-evaluation tolerances reported beside the mission's own.
@@ -125,7 +126,32 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     out["policy"] = {"summary": mc.summary(tols), "episodes": mc.episodes}
     out["pd_baseline"] = {"summary": pd.summary(tols), "episodes": pd.episodes}
     out["trajectories"] = {"policy": mc.trajectories, "pd_baseline": pd.trajectories}
+    out["conditions"] = condition_table(actor, grid, spec, ev.conditions, n)
     return out
+
+
+def condition_table(
+    actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, conditions: list[Condition], episodes: int
+) -> list[dict]:
+    """The policy and PD under each condition, on the evaluation's slews (float64, the mission's
+    physics): one row per condition with each controller's summary."""
+    if not conditions:
+        return []
+    design = Design.from_grid(grid, spec.modules)
+    tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
+    kw: dict[str, Any] = dict(episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
+    m, mods = spec.mission, spec.modules
+    pol = monte_carlo_conditions(design, controller_for(actor, grid, spec), m, mods, conditions, **kw)
+    pd = monte_carlo_conditions(design, PDController, m, mods, conditions, **kw)
+    return [
+        {
+            "name": c.name,
+            "changes": c.changes(),
+            "policy": pol[c.name].summary(tols),
+            "pd_baseline": pd[c.name].summary(tols),
+        }
+        for c in conditions
+    ]
 
 
 def curve_png(curve: list[dict], title: str) -> bytes:
@@ -190,4 +216,5 @@ def run_summary(ev: EvaluationReport, design: DesignReport) -> RunSummary:
         policy=ev.policy.summary,
         pd_baseline=ev.pd_baseline.summary if ev.pd_baseline else None,
         design=design.figures(),
+        conditions=ev.conditions,
     )

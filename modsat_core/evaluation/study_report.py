@@ -140,6 +140,34 @@ def held_curves(runs: list[SavedRun], key: str) -> dict[str, Any]:
     }
 
 
+def condition_means(runs: list[SavedRun]) -> dict[str, Any]:
+    """Per flight condition (nominal first, then those every finished run flew): mean and std over
+    the runs of the policy's and of PD's success (the mission's tolerance) and violations."""
+    evs = [r.evaluation for r in runs if r.evaluation is not None and r.evaluation.pd_baseline is not None]
+    if not evs:
+        return {}
+    names = [c.name for c in evs[0].conditions]
+    names = [n for n in names if all(any(c.name == n for c in ev.conditions) for ev in evs)]
+    out: dict[str, Any] = {}
+    for name in ["nominal", *names]:
+        pairs = []
+        for ev in evs:
+            if name == "nominal":
+                assert ev.pd_baseline is not None
+                pairs.append((ev.policy.summary, ev.pd_baseline.summary))
+            else:
+                c = next(c for c in ev.conditions if c.name == name)
+                pairs.append((c.policy, c.pd_baseline))
+        out[name] = {
+            who: {
+                "success": _mean_std([p[i].success_rate for p in pairs]),
+                "violations": _mean_std([p[i].safety_violations for p in pairs]),
+            }
+            for i, who in enumerate(("policy", "pd"))
+        }
+    return out
+
+
 def study(runs: list[SavedRun]) -> dict[str, Any]:
     """The study's table, curves and designs, by algorithm (JSON-ready)."""
     check_comparable(runs)
@@ -167,6 +195,7 @@ def study(runs: list[SavedRun]) -> dict[str, Any]:
                 k: _mean_std([d.get(k) for d in designs])
                 for k in ("modules", "actuators", "mirror_planes", "products_of_inertia_ratio", "com_offset_modules")
             },
+            "conditions": condition_means(done),
             "curves": {
                 "mean_return": held_curves(group, "mean_return"),
                 "success_rate": held_curves(group, "success_rate"),
@@ -200,6 +229,22 @@ def table_markdown(result: dict[str, Any]) -> str:
             f"{_pm(m['modules'])} | {_pm(m['actuators'])} | {_pm(m['mirror_planes'])} | "
             f"{_pm(m['products_of_inertia_ratio'], fmt='{:.3f}')} | {_pm(m['com_offset_modules'], fmt='{:.2f}')} |"
         )
+    conds = [(label, a["conditions"]) for label, a in result["algorithms"].items() if a.get("conditions")]
+    if conds:
+        lines += [
+            "",
+            "Flight conditions (docs/robustness.md), success at the mission's tolerance (%), mean ± std over seeds:",
+            "",
+            "| method | condition | policy | PD on its designs | policy violations | PD violations |",
+            "|---|---|---|---|---|---|",
+        ]
+        for label, table in conds:
+            for name, row in table.items():
+                p, d = row["policy"], row["pd"]
+                lines.append(
+                    f"| {label} | {name} | {_pm(p['success'], 100)} | {_pm(d['success'], 100)} | "
+                    f"{_pm(p['violations'])} | {_pm(d['violations'])} |"
+                )
     return "\n".join(lines) + "\n"
 
 

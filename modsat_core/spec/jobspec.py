@@ -18,8 +18,9 @@ from pydantic_core import ErrorDetails
 
 from modsat_core.grid import is_connected
 from modsat_core.spec.diffsim import Diffsim
+from modsat_core.spec.evaluation import Evaluation, Randomise
 from modsat_core.spec.objective import Objective
-from modsat_core.spec.sections import GA, DesignSpace, Evaluation, Mission, ModuleCatalog, RewardSpec, _Section
+from modsat_core.spec.sections import GA, DesignSpace, Mission, ModuleCatalog, RewardSpec, _Section
 from modsat_core.spec.training import Training
 
 __all__ = [
@@ -65,6 +66,7 @@ class JobSpec(_Section):
     evaluation: Evaluation = Field(default_factory=Evaluation)
     diffsim: Diffsim = Field(default_factory=Diffsim)
     objective: Objective = Field(default_factory=Objective)
+    randomise: Randomise = Field(default_factory=Randomise)
 
     @model_validator(mode="after")
     def _check_consistency(self) -> JobSpec:

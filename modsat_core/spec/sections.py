@@ -249,19 +249,3 @@ class GA(_Section):
     steps_per_design: int = Field(
         50_000, ge=1, le=100_000_000, description="Env steps of the inner learner for each new design."
     )
-
-
-class Evaluation(_Section):
-    """The Monte-Carlo evaluation: a fixed, seeded set of slews."""
-
-    episodes: int = Field(100, ge=1, le=10_000, description="Slews in the final Monte-Carlo evaluation.")
-    seed: int = Field(12345, ge=0, le=2**31 - 1, description="Seed of the slew set (independent of training).")
-    trajectories: int = Field(3, ge=0, le=50, description="Episodes whose full time history is kept.")
-    basilisk: bool = Field(
-        False,
-        description=(
-            "Also fly the evaluation slews in Basilisk beside modsat, with the policy and the PD baseline "
-            "(`modsat verify --basilisk`, docs/verification.md); the report is `verification.json`. Needs "
-            "Basilisk where the run trains (`pip install -e '.[basilisk]'`); without it the report says so."
-        ),
-    )

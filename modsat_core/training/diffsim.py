@@ -43,6 +43,7 @@ from modsat_core.artefacts import ProgressRecord
 from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
 from modsat_core.grid import random_valid_design
+from modsat_core.sim.conditions import Axes, Flight, RowConditions, perturb_draw, true_inertia
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.diffsim import Diffsim
@@ -76,13 +77,17 @@ def step_cost(sim: SlewSim, d: Diffsim) -> Tensor:
     )
 
 
-def window_loss(sim: SlewSim, controller: DiffsimController, d: Diffsim) -> Tensor:
+def window_loss(sim: SlewSim, controller: DiffsimController, d: Diffsim, flight: Flight | None = None) -> Tensor:
     """Fly ``window_steps`` control steps from the sim's state and return the window's mean cost
-    (a scalar with the graph of every step)."""
+    (a scalar with the graph of every step); with ``flight``, under its rows' conditions (the cost is
+    the true state's)."""
     total = torch.zeros((), dtype=sim.dtype, device=sim.device)
     cost = total
     for _ in range(d.window_steps):
-        sim.step(controller(sim))
+        if flight is None:
+            sim.step(controller(sim))
+        else:
+            flight.step(controller)
         cost = step_cost(sim, d)
         total = total + cost.mean()
     return (total + d.terminal_weight * cost.mean()) / (d.window_steps + d.terminal_weight)
@@ -120,7 +125,9 @@ class DiffsimRun:
         # so that later windows hold slews at every stage.
         windows = max(1, math.ceil(T / W))
         self.ep_steps = torch.as_tensor(self.rng.integers(0, windows, size=B) * W, dtype=torch.long)
-        self.sim.reset(list(range(B)), [draw_episode(self.rng, spec.mission) for _ in range(B)])
+        # Domain randomisation (the `randomise` section): the flight between controller and sim.
+        self.flight = Flight(self.sim, max_delay=spec.randomise.delay_steps, seed=spec.seed)
+        self.start_slews(torch.arange(B))
         self.env_steps = 0
         self.updates = 0
         self.curve: list[dict] = []
@@ -158,12 +165,12 @@ class DiffsimRun:
         for group in self.opt.param_groups:
             group["lr"] = self.lr(self.updates)
         self.policy.train()
-        loss = window_loss(self.sim, self.controller, self.d)
+        loss = window_loss(self.sim, self.controller, self.d, self.flight)
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = float(torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.d.grad_clip))
         self.opt.step()
-        self.sim.detach()
+        self.flight.detach()
         self.updates += 1
         self.env_steps += self.steps_per_update
         self.ep_steps += self.d.window_steps
@@ -173,10 +180,30 @@ class DiffsimRun:
             if len(self.pool) > 1:
                 self.row_design[idx] = torch.as_tensor(self.rng.integers(*self.active, size=len(idx)))
                 self.fly_designs(idx)
-            self.sim.reset(idx.tolist(), [draw_episode(self.rng, self.spec.mission) for _ in range(len(idx))])
+            self.start_slews(idx)
             self.ep_steps[idx] = 0
         self.last = {"loss": float(loss.detach()), "grad_norm": grad_norm}
         return self.last
+
+    def start_slews(self, idx: Tensor) -> None:
+        """New training slews on rows ``idx`` (on their designs); with `randomise`, each under
+        conditions drawn for it: the sim flies the true inertia, the controller knows the design's."""
+        n = len(idx)
+        draws = [draw_episode(self.rng, self.spec.mission) for _ in range(n)]
+        r = self.spec.randomise
+        if r.active:
+            rows, axes = RowConditions.drawn(r, self.rng, n), Axes.draw(self.rng, n)
+            I_model = np.stack([self.pool[i].I_B for i in self.row_design[idx].tolist()])
+            dev = self.sim.device
+            I_true = torch.as_tensor(true_inertia(I_model, rows, axes)).to(dev)
+            self.sim.set_plants(idx.to(dev), I_true, self.sim.plant.actuator_mask[idx.to(dev)])
+            self.flight.set_rows(idx, rows, torch.as_tensor(I_model))
+            draws = [
+                perturb_draw(dr, rows.tumble_rad_s[k], rows.disturbance_Nm[k], axes.tumble[k], axes.disturbance[k])
+                for k, dr in enumerate(draws)
+            ]
+        self.sim.reset(idx.tolist(), draws)
+        self.flight.reset_rows(idx)
 
     def fly_designs(self, idx: Tensor) -> None:
         """Put rows ``idx`` on their designs of the pool (``row_design``)."""
@@ -257,6 +284,7 @@ class DiffsimRun:
             "ep_steps": self.ep_steps.clone(),
             "row_design": self.row_design.clone(),
             "sim": self.sim.flight_state(),
+            "flight": self.flight.state_dict(),
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -273,3 +301,5 @@ class DiffsimRun:
             self.row_design = torch.as_tensor(d["row_design"], dtype=torch.long)
             self.fly_designs(torch.arange(len(self.row_design)))
         self.sim.load_flight(d["sim"])
+        if "flight" in d:  # checkpoints written before domain randomisation have none (and need none)
+            self.flight.load_state_dict(d["flight"])

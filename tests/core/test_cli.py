@@ -83,6 +83,30 @@ def test_train_and_eval_commands(tmp_path):
     assert report["episodes"] == 2 and report["policy"]["summary"]["episodes"] == 2
 
 
+def test_eval_flies_the_conditions_asked_for(tmp_path):
+    """`modsat eval --conditions`: standard names, `none`, a JSON file; a bad one is a readable error."""
+    from ..learning.test_diffsim import tiny_diffsim
+
+    spec_file = tmp_path / "spec.json"
+    spec_file.write_text(tiny_diffsim(evaluation={"episodes": 3, "trajectories": 1, "conditions": []}).model_dump_json())
+    out = tmp_path / "run"
+    assert modsat("train", str(spec_file), "--out", str(out)).returncode == 0
+    assert json.loads((out / "evaluation.json").read_text())["conditions"] == []  # the spec asked for none
+    r = modsat("eval", str(out), "--conditions", "delay-1,tumble")
+    assert r.returncode == 0, r.stderr
+    rows = [ln.split()[0] for ln in r.stdout.splitlines() if ln.startswith("  ") and ln[2] != " "]
+    assert rows == ["condition", "nominal", "delay-1", "tumble"], r.stdout
+    custom = tmp_path / "conditions.json"
+    custom.write_text(json.dumps(["weak-wheels", {"name": "late-3", "delay_steps": 3}]))
+    r = modsat("eval", str(out), "--conditions", str(custom), "--json")
+    assert r.returncode == 0, r.stderr
+    table = json.loads(r.stdout)["conditions"]
+    assert [c["name"] for c in table] == ["weak-wheels", "late-3"] and table[1]["changes"] == {"delay_steps": 3}
+    assert {"success_rate", "safety_violations"} <= set(table[1]["pd_baseline"])
+    r = modsat("eval", str(out), "--conditions", "nope")
+    assert r.returncode == 2 and "unknown condition 'nope'" in r.stderr and "delay-1" in r.stderr
+
+
 def test_train_and_eval_reject_bad_input(tmp_path):
     r = modsat("train", "--preset", "nope", "--out", str(tmp_path / "x"))
     assert r.returncode == 2 and "unknown preset" in r.stderr

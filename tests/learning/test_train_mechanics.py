@@ -274,3 +274,26 @@ def test_design_bc_keeps_the_design_head_near_the_flown_designs():
         run.run(lambda _p: None, lambda _c: None, lambda: False)
         gaps[w] = _design_gap(run)
     assert gaps[10.0] < 0.8 * gaps[0.0], gaps
+
+
+#: Domain randomisation at the standard conditions' magnitudes (`randomise`, docs/robustness.md).
+RANDOMISE = {
+    "attitude_noise_deg": 0.01,
+    "rate_noise_rad_s": 5e-4,
+    "delay_steps": 1,
+    "inertia_scale": 1.1,
+    "inertia_rotation_deg": 5.0,
+    "torque_fraction": 0.8,
+    "tumble_rad_s": 0.05,
+    "disturbance_Nm": 1e-4,
+}
+
+
+def test_td3_trains_under_domain_randomisation_and_resumes_exactly():
+    """TD3's env draws each flight's conditions (its own stream): the run differs from the nominal
+    one, and stop + resume (conditions, commands on their way, noise stream saved) is the straight run."""
+    spec = tiny_spec(design__repair=True, randomise=RANDOMISE)
+    straight = train(spec)
+    assert straight.curve != train(tiny_spec(design__repair=True)).curve
+    ck = first_checkpoint(spec)
+    assert train(spec, checkpoint=ck).curve == straight.curve

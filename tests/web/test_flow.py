@@ -158,6 +158,12 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     assert page.locator("#evaluation .design-pic svg.thumb").count() == 1
     table = page.text_content("#evaluation")
     assert "PD baseline" in table and "success rate" in table and "mean return" in table
+    # The flight conditions' table (docs/robustness.md): nominal, then each of the spec's conditions.
+    conditions = service.client.get(f"/api/jobs/{job_id}/artifacts/evaluation.json").json()["conditions"]
+    rows = page.locator("#conditions tr[data-condition]")
+    assert rows.count() == 1 + len(conditions) and len(conditions) >= 1
+    late = page.locator("#conditions tr[data-condition='delay-1']")
+    assert "delay_steps 1" in late.text_content() and late.locator("td").count() == 7
     assert re.search(r"Design: \d+ modules, \d+ actuators?\b", table), table
     assert not re.search(r"\b1 actuators\b", table), table
     names = page.locator("#downloads a").all_text_contents()

@@ -540,6 +540,26 @@ function evalTable(ev) {
       ...cols.map((c) => el("td", { class: "num", text: f(c[1][key], c[1]) }))))));
 }
 
+// evaluation.json's flight conditions (docs/robustness.md): the policy and PD on the same slews
+// under sensor noise, delay, inertia error, weak wheels, tumble, disturbance, out-of-range slews.
+function conditionsTable(ev) {
+  const conds = Array.isArray(ev.conditions) ? ev.conditions : [];
+  if (!conds.length) return null;
+  const pol = ev.policy && ev.policy.summary, pd = ev.pd_baseline && ev.pd_baseline.summary;
+  const rows = [{ name: "nominal", changes: {}, policy: pol, pd_baseline: pd }, ...conds];
+  const what = (c) => Object.entries(c.changes || {}).map(([k, v]) => `${k} ${v}`).join(", ") || "the evaluation's slews";
+  const cells = (s) => (s ? [fmt.pct(s.success_rate), fmt.int(s.safety_violations), fmt.num(2)(s.median_settling_time_s)]
+    : ["-", "-", "-"]).map((t) => el("td", { class: "num", text: t }));
+  const head = ["condition", "what changes", "policy success", "violations", "settling (s)",
+    "PD success", "violations", "settling (s)"];
+  return el("div", { id: "conditions" },
+    el("h3", { text: "Flight conditions (same slews, policy and PD)" }),
+    el("table", { class: "eval conditions" },
+      el("thead", {}, el("tr", {}, ...head.map((t, i) => el("th", { class: i > 1 ? "num" : "", text: t })))),
+      el("tbody", {}, ...rows.map((c) => el("tr", { "data-condition": c.name }, el("th", { text: c.name }),
+        el("td", { class: "hint", text: what(c) }), ...cells(c.policy), ...cells(c.pd_baseline))))));
+}
+
 // verification.json (evaluation.basilisk): the same slews flown in modsat and in Basilisk.
 function verifyView(v) {
   const head = el("h3", { text: "Basilisk verification" });
@@ -612,7 +632,8 @@ async function renderFiles(job, files) {
   if (names.has("evaluation.json")) {
     const r = await api(`/api/jobs/${job.id}/artifacts/evaluation.json`);
     if (r.ok) state.reference = referenceFrom(r.body, job);
-    evBox.replaceChildren(...(r.ok ? [designLine(job.evaluation && job.evaluation.design), evalTable(r.body)]
+    evBox.replaceChildren(...(r.ok ? [designLine(job.evaluation && job.evaluation.design), evalTable(r.body),
+      conditionsTable(r.body)]
       : [el("p", { class: "errors", text: errorText(r) })]).filter(Boolean));
   } else {
     evBox.replaceChildren(el("p", { class: "hint", text: TERMINAL.has(job.status)
