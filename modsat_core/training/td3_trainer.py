@@ -125,7 +125,7 @@ class TD3Run:
     def current_grid(self) -> np.ndarray:
         if self.fixed_grid is not None:
             return self.fixed_grid
-        return design_with(self._eval_actor(), self.spec)
+        return design_with(self._eval_actor(), self.spec.design, self.spec.mission)
 
     def _cpu_actor(self) -> torch.nn.Module:
         a = copy.deepcopy(self.agent.actor).cpu()
