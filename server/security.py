@@ -11,7 +11,7 @@ service would take such a request for the user's own. So, for HTTP and websocket
   this server's own origin or one listed in ``MODSAT_ALLOWED_ORIGINS``: a foreign
   ``Origin``, or ``Sec-Fetch-Site: cross-site``, is 403. Clients that are not browsers
   (curl, scripts) send neither header and are not affected.
-* Websockets (the API has none; the viewer's are checked in web.live with the
+* Websockets (the API has none; the viewer's are checked in web/live/guard.py with the
   same rules, web/origin.py) must come from a page on an allowed host.
 
 Submissions must also be ``application/json`` (415), see routes_jobs.py.

@@ -1,5 +1,5 @@
 """Which web pages may talk to a modsat server: shared by the API (server/security.py) and the
-live viewer's websocket (live.py). No dependencies beyond the standard library."""
+live viewer's websocket (live/guard.py). No dependencies beyond the standard library."""
 
 from __future__ import annotations
 

@@ -24,19 +24,19 @@ from modsat_core.grid import ACTUATOR
 from modsat_core.sim.morphology import seed_component_batched
 from modsat_core.sim.pd import pd_gains
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import DesignSpace, JobSpec, Mission, ModuleCatalog
 
 
 @torch.no_grad()
-def design_with(actor: nn.Module, spec: JobSpec) -> np.ndarray:
+def design_with(actor: nn.Module, design_space: DesignSpace, mission: Mission) -> np.ndarray:
     """The grid the deterministic NCA grows from the seed module in ``design_steps`` steps."""
-    N, D = spec.design.grid_size, spec.design.design_steps
+    N, D = design_space.grid_size, design_space.design_steps
     grid = torch.as_tensor(seed_grid(N)).unsqueeze(0)
     phys = PhysState(torch.zeros(1, 4), torch.zeros(1, 4), torch.zeros(1, 3), torch.zeros(1, N**3, 3))
     for d in range(D):
-        obs = cell_observation(grid, torch.tensor([d]), D, phys, spec.mission.rate_limit_rad_s)
+        obs = cell_observation(grid, torch.tensor([d]), D, phys, mission.rate_limit_rad_s)
         grid = actor(obs).argmax(dim=-1).reshape(1, N, N, N)
-    if spec.design.repair:
+    if design_space.repair:
         grid = seed_component_batched(grid)
     return grid[0].numpy().astype(np.int64)
 
@@ -45,11 +45,14 @@ class PolicyController:
     """Flies a fixed design with the actor's control head, for :func:`monte_carlo`.
 
     The Monte-Carlo simulator packs wheel units in row-major cell order, the same order
-    as the actor's cells, so unit k is the k-th actuator cell.
+    as the actor's cells, so unit k is the k-th actuator cell. The observation is the design
+    phase's last step (``design_space.design_steps``: the design is done) and the mission's
+    rate limit scales the body rate, as in training.
     """
 
-    def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
-        self.actor, self.spec = actor, spec
+    def __init__(self, actor: nn.Module, grid: np.ndarray, design_space: DesignSpace, mission: Mission):
+        self.actor = actor
+        self.design_steps, self.rate_limit_rad_s = design_space.design_steps, mission.rate_limit_rad_s
         self.grid = torch.as_tensor(np.asarray(grid), dtype=torch.long)
         self.N = self.grid.shape[0]
         self.act_cells = torch.as_tensor(np.flatnonzero(np.asarray(grid).reshape(-1) == ACTUATOR))
@@ -60,8 +63,8 @@ class PolicyController:
         h_cells[:, self.act_cells] = (sim.state.h_B / sim.h_scale_Nms).float()
         phys = PhysState(sim.state.q_BN.float(), sim.q_TN.float(), sim.state.omega_B.float(), h_cells)
         grids = self.grid.expand(B, self.N, self.N, self.N)
-        D = self.spec.design.design_steps
-        return cell_observation(grids, torch.full((B,), D), D, phys, self.spec.mission.rate_limit_rad_s)
+        D = self.design_steps
+        return cell_observation(grids, torch.full((B,), D), D, phys, self.rate_limit_rad_s)
 
     def __call__(self, sim: SlewSim) -> Tensor:
         with torch.no_grad():
@@ -84,27 +87,29 @@ class ExportedController(nn.Module):
         act_cells: Tensor
         value_mask: Tensor
 
-    def __init__(self, actor: nn.Module, grid: np.ndarray, spec: JobSpec):
+    def __init__(
+        self, actor: nn.Module, grid: np.ndarray, design_space: DesignSpace, mission: Mission, modules: ModuleCatalog
+    ):
         super().__init__()
         N = np.asarray(grid).shape[0]
         C = N**3
-        ctrl = PolicyController(actor, grid, spec)
+        ctrl = PolicyController(actor, grid, design_space, mission)
         # Constant part of the per-cell features: everything but the state-dependent slots.
         probe = PhysState(
             torch.tensor([[1.0, 0, 0, 0]]), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros(1, 3), torch.zeros(1, C, 3)
         )
-        D = spec.design.design_steps
-        base = cell_observation(ctrl.grid.unsqueeze(0), torch.tensor([D]), D, probe, spec.mission.rate_limit_rad_s)
+        D = design_space.design_steps
+        base = cell_observation(ctrl.grid.unsqueeze(0), torch.tensor([D]), D, probe, mission.rate_limit_rad_s)
         self.register_buffer("base_x", base.x[0].clone())
         self.register_buffer("occupied", (ctrl.grid.reshape(-1) != 0).float().unsqueeze(-1))
         self.register_buffer("act_cells", ctrl.act_cells.clone())
         self.register_buffer("value_mask", (ctrl.grid.reshape(-1) != 0).unsqueeze(0))
         self.c0 = CONTROL_AT
         self.n_glob = N_CONTROL_GLOBAL
-        self.rate_limit = spec.mission.rate_limit_rad_s
-        self.tau_max = spec.modules.torque_scale_Nm
-        cap = spec.modules.momentum_capacity_Nms
-        self.h_scale = cap if cap is not None else spec.modules.torque_scale_Nm
+        self.rate_limit = mission.rate_limit_rad_s
+        self.tau_max = modules.torque_scale_Nm
+        cap = modules.momentum_capacity_Nms
+        self.h_scale = cap if cap is not None else modules.torque_scale_Nm
         self.actor = cast("CellActor | SetActor", actor)  # what make_actor builds; forward calls its .act
 
     def forward(self, q_BT: Tensor, omega_B: Tensor, h_B: Tensor) -> Tensor:
@@ -127,7 +132,7 @@ def controller_for(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> Callabl
     the first-order learner's controller or the co-design actor's control head."""
     if isinstance(actor, DiffsimPolicy):
         return DiffsimController(actor, spec.mission.rate_limit_rad_s, spec.diffsim.base)
-    return PolicyController(actor, grid, spec)
+    return PolicyController(actor, grid, spec.design, spec.mission)
 
 
 def exported(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> nn.Module:
@@ -139,4 +144,4 @@ def exported(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> nn.Module:
         return ExportedDiffsimController(
             actor, grid, spec.mission.rate_limit_rad_s, spec.modules.torque_scale_Nm, sim.plant.I_B[0], pd
         )
-    return ExportedController(actor, grid, spec)
+    return ExportedController(actor, grid, spec.design, spec.mission, spec.modules)

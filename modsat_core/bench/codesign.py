@@ -26,16 +26,16 @@ from modsat_core.bench.learners import _cpu_model, timed_train
 from modsat_core.grid import ACTUATOR, EMPTY
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.pd import PDController
-from modsat_core.spec.jobspec import JobSpec, parse_spec
+from modsat_core.spec.jobspec import DesignSpace, JobSpec, Objective, parse_spec
 from modsat_core.spec.presets import get_preset
 from modsat_core.training.diffsim_codesign import fixed_cells, satellites, score_designs
 
 
-def random_designs(spec: JobSpec, n: int, seed: int) -> list[np.ndarray]:
+def random_designs(design_space: DesignSpace, objective: Objective, n: int, seed: int) -> list[np.ndarray]:
     """``n`` valid satellites drawn from the uniform per-cell distribution, the payload kept."""
-    fixed, types = fixed_cells(spec)
+    fixed, types = fixed_cells(design_space, objective)
     rng = np.random.default_rng([seed, 7])
-    N = spec.design.grid_size
+    N = design_space.grid_size
     out: list[np.ndarray] = []
     while len(out) < n:
         g = satellites(rng.integers(0, 3, size=(1, N, N, N)), fixed, types)[0]
@@ -44,10 +44,10 @@ def random_designs(spec: JobSpec, n: int, seed: int) -> list[np.ndarray]:
     return out
 
 
-def initial_design(spec: JobSpec) -> np.ndarray:
+def initial_design(design_space: DesignSpace, objective: Objective) -> np.ndarray:
     """The full cube with its centre actuator; the payload cells structure."""
-    fixed, types = fixed_cells(spec)
-    return np.where(fixed, types, reference_design(spec.design.grid_size)).astype(np.int64)
+    fixed, types = fixed_cells(design_space, objective)
+    return np.where(fixed, types, reference_design(design_space.grid_size)).astype(np.int64)
 
 
 def _figures(grid: np.ndarray) -> dict[str, int]:
@@ -98,8 +98,8 @@ def bench_codesign(preset: str, seed: int, designs: int, slews: int) -> dict[str
     policy, kept, spec = load_policy(files["policy.pt"])
     assert kept is not None
     ev = json.loads(files["evaluation.json"])
-    cube = initial_design(spec)
-    rand = random_designs(spec, designs, seed)
+    cube = initial_design(spec.design, spec.objective)
+    rand = random_designs(spec.design, spec.objective, designs, seed)
     grids = [kept, cube, *rand]
     cmp_seed = spec.evaluation.seed + 2
     learned = score_designs(spec, policy.double(), grids, slews, cmp_seed, exact=True)

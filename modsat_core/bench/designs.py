@@ -25,7 +25,7 @@ from modsat_core.grid import random_valid_design
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design
-from modsat_core.spec.jobspec import JobSpec, parse_spec
+from modsat_core.spec.jobspec import DesignSpace, Evaluation, JobSpec, Mission, ModuleCatalog, parse_spec
 from modsat_core.spec.presets import get_preset
 
 #: Episodes flown in one batch (memory: a 5x5x5 design pool's slews carry up to 125 wheel units).
@@ -46,27 +46,29 @@ def designs_spec(seed: int, updates: int, pool: int, grid_size: int = 3) -> JobS
     return parse_spec(d)
 
 
-def held_out_designs(spec: JobSpec, n: int, exclude: list[np.ndarray]) -> list[np.ndarray]:
-    """``n`` distinct random valid designs of the spec's design space, none in ``exclude``."""
-    rng = np.random.default_rng([spec.seed, 3])
+def held_out_designs(design_space: DesignSpace, seed: int, n: int, exclude: list[np.ndarray]) -> list[np.ndarray]:
+    """``n`` distinct random valid designs of ``design_space``, none in ``exclude``; ``seed``: the run's."""
+    rng = np.random.default_rng([seed, 3])
     seen = {np.asarray(g, dtype=np.int64).tobytes() for g in exclude}
     out: list[np.ndarray] = []
     while len(out) < n:
-        g = random_valid_design(rng, spec.design.grid_size)
+        g = random_valid_design(rng, design_space.grid_size)
         if g.tobytes() not in seen:
             seen.add(g.tobytes())
             out.append(g)
     return out
 
 
-def fly_designs(spec: JobSpec, controller, grids: list[np.ndarray], slews: int) -> dict[str, Any]:
+def fly_designs(
+    controller, grids: list[np.ndarray], slews: int, mission: Mission, modules: ModuleCatalog, evaluation: Evaluation
+) -> dict[str, Any]:
     """``controller`` (a function of the sim, or a class as PDController) on ``slews`` evaluation
     slews of each design; a summary over all of them."""
-    designs = [Design.from_grid(g, spec.modules) for g in grids for _ in range(slews)]
+    designs = [Design.from_grid(g, modules) for g in grids for _ in range(slews)]
     episodes: list[dict] = []
     for start in range(0, len(designs), CHUNK):
         part = designs[start : start + CHUNK]
-        mc = monte_carlo(part, controller, spec.mission, spec.modules, episodes=len(part), seed=spec.evaluation.seed)
+        mc = monte_carlo(part, controller, mission, modules, episodes=len(part), seed=evaluation.seed)
         episodes += mc.episodes
     ok = np.array([bool(e["success"]) for e in episodes]).reshape(len(grids), slews)
     settle = [e["settling_time_s"] for e in episodes if e["success"]]
@@ -90,7 +92,7 @@ def bench_designs(seed: int, updates: int, pool: int, designs: int, slews: int, 
     from modsat_core.training.diffsim import DiffsimRun
 
     pool_grids = [d.grid for d in DiffsimRun(spec).pool]  # the designs training flew (re-drawn, same seed)
-    grids = held_out_designs(spec, designs, pool_grids)
+    grids = held_out_designs(spec.design, spec.seed, designs, pool_grids)
     own = json.loads(files["evaluation.json"])
     return {
         "seed": seed,
@@ -100,8 +102,10 @@ def bench_designs(seed: int, updates: int, pool: int, designs: int, slews: int, 
         "train_s": round(train_s, 1),
         "held_out_designs": designs,
         "slews_per_design": slews,
-        "diffsim": fly_designs(spec, controller_for(actor, grid, spec), grids, slews),
-        "pd": fly_designs(spec, PDController, grids, slews),
+        "diffsim": fly_designs(
+            controller_for(actor, grid, spec), grids, slews, spec.mission, spec.modules, spec.evaluation
+        ),
+        "pd": fly_designs(PDController, grids, slews, spec.mission, spec.modules, spec.evaluation),
         "run_design": {
             "success_rate_at_0.25_deg": own["policy"]["summary"].get("success_rate_at_0.25_deg"),
             "median_settling_time_s": own["policy"]["summary"]["median_settling_time_s"],

@@ -17,7 +17,7 @@ import torch
 
 from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.evaluation.run_files import evaluate_design
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import Evaluation, JobSpec
 
 
 def rank(point: dict) -> tuple[float, float]:
@@ -26,9 +26,9 @@ def rank(point: dict) -> tuple[float, float]:
     return point.get("success_rate", 0.0), point["mean_return"]
 
 
-def validation_seed(spec: JobSpec) -> int:
+def validation_seed(evaluation: Evaluation) -> int:
     """Seed of the validation slews: apart from the curve's and the final evaluation's."""
-    return (spec.evaluation.seed + 104_729) % (2**31)
+    return (evaluation.seed + 104_729) % (2**31)
 
 
 def keep(kept: list[dict], point: dict, actor: torch.nn.Module, grid: np.ndarray, k: int) -> list[dict]:
@@ -62,7 +62,7 @@ def validate(kept: list[dict], spec: JobSpec) -> tuple[dict, list[dict]]:
             np.asarray(s["grid"], dtype=np.int64),
             spec,
             episodes=spec.evaluation.episodes,
-            seed=validation_seed(spec),
+            seed=validation_seed(spec.evaluation),
         )
         summary = {"success_rate": 0.0, "mean_return": s["mean_return"]} if mc is None else mc.summary()
         scores.append(

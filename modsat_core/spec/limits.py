@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from modsat_core.spec.jobspec import JobSpec, is_diffsim
+from modsat_core.spec.jobspec import JobSpec, Training, is_diffsim
 
 #: Per-cell features (``features.N_FEATURES``; a test checks they agree).
 N_FEATURES = 53
@@ -83,10 +83,10 @@ def transition_bytes(N: int) -> int:
     return sum(math.prod(shape) * _ITEM_BYTES[dt] for shape, dt in replay_layout(N).values())
 
 
-def replay_capacity(spec: JobSpec) -> int:
-    """The transitions a run's buffer holds (as :class:`~modsat_core.training.td3_trainer.TD3Run` allocates it)."""
-    t = spec.training
-    return min(t.buffer_size, max(t.total_env_steps, t.batch_size))
+def replay_capacity(training: Training) -> int:
+    """The transitions a TD3 run's replay buffer holds: ``buffer_size``, but no more than the run
+    will ever store (its env steps, at least one batch)."""
+    return min(training.buffer_size, max(training.total_env_steps, training.batch_size))
 
 
 @dataclass(frozen=True)
@@ -158,7 +158,7 @@ def estimate(spec: JobSpec) -> Estimate:
             evaluation_steps=evaluation_steps,
         )
     return Estimate(
-        replay_bytes=replay_capacity(spec) * transition_bytes(N),
+        replay_bytes=replay_capacity(t) * transition_bytes(N),
         update_bytes=update,
         step_bytes=step,
         evaluation_bytes=evaluation,
@@ -223,7 +223,7 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
                 (
                     f"{'.'.join(loc)}: this run would need about {_gib(est.memory_bytes)} of memory, more than this "
                     f"service allows ({_gib(limits.max_memory_bytes)}, MODSAT_MAX_JOB_MEMORY_GIB): replay buffer "
-                    f"{_gib(est.replay_bytes)} ({replay_capacity(spec):,} transitions of a "
+                    f"{_gib(est.replay_bytes)} ({replay_capacity(t):,} transitions of a "
                     f"{spec.design.grid_size}^3 grid), one update {_gib(est.update_bytes)} (batch {t.batch_size}), "
                     f"stepping {_gib(est.step_bytes)} "
                     f"({t.num_envs} envs), evaluation {_gib(est.evaluation_bytes)}; lower {'.'.join(loc)}"

@@ -39,7 +39,7 @@ from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.evaluation.monte_carlo import monte_carlo
 from modsat_core.grid import ACTUATOR, EMPTY, STRUCTURE, flood_fill
 from modsat_core.sim.slew import Design
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import DesignSpace, JobSpec
 from modsat_core.spec.objective import Objective
 from modsat_core.training.diffsim import DiffsimRun, training_mission
 
@@ -56,12 +56,13 @@ def objective_s(episodes: list[dict], grid: np.ndarray, objective: Objective, ep
     return float(np.mean(times)) + objective.module_price_s * modules + objective.wheel_price_s * wheels
 
 
-def fixed_cells(spec: JobSpec) -> tuple[np.ndarray, np.ndarray]:
-    """The cells the design learner never changes, (N, N, N) bool, and their types (int64)."""
-    N = spec.design.grid_size
+def fixed_cells(design_space: DesignSpace, objective: Objective) -> tuple[np.ndarray, np.ndarray]:
+    """The cells the design learner never changes, (N, N, N) bool, and their types (int64): the
+    objective's payload cells as structure, else the grid's centre as an actuator."""
+    N = design_space.grid_size
     mask = np.zeros((N, N, N), dtype=bool)
     types = np.zeros((N, N, N), dtype=np.int64)
-    payload = spec.objective.payload_cells
+    payload = objective.payload_cells
     if payload:
         for c in payload:
             mask[c], types[c] = True, STRUCTURE
@@ -117,7 +118,7 @@ class DiffsimCodesignRun(DiffsimRun):
 
     def __init__(self, spec: JobSpec, device: str = "cpu"):
         N = spec.design.grid_size
-        self.fixed, self.fixed_types = fixed_cells(spec)
+        self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective)
         self.logits = torch.zeros(N**3, 3, dtype=torch.float64, requires_grad=True)
         self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
         self.design_rng = np.random.default_rng([spec.seed, 5])

@@ -33,7 +33,7 @@ from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.artefacts import CurvePoint, ProgressRecord
 from modsat_core.evaluation.run_files import run_files
 from modsat_core.grid import is_valid, random_design
-from modsat_core.spec.jobspec import JobSpec, is_diffsim
+from modsat_core.spec.jobspec import GA, JobSpec, Training, is_diffsim
 from modsat_core.training.checkpoint import CHECKPOINT_VERSION, RunResult
 from modsat_core.training.diffsim import DiffsimRun
 from modsat_core.training.diffsim_codesign import fixed_cells, satellites, score_designs
@@ -42,11 +42,12 @@ from modsat_core.training.td3_trainer import TD3Run
 MAX_DRAWS = 100_000
 
 
-def survivor_count(spec: JobSpec, used: int) -> tuple[int, float]:
-    """Survivors after ``used`` env steps of the budget: (count, scheduled fraction)."""
-    g, P = spec.ga, spec.ga.population_size
-    share = min(1.0, used / spec.training.total_env_steps)
-    frac = g.survivor_start + (g.survivor_end - g.survivor_start) * share
+def survivor_count(ga: GA, training: Training, used: int) -> tuple[int, float]:
+    """Survivors after ``used`` env steps of the budget (``training.total_env_steps``): (count,
+    scheduled fraction)."""
+    P = ga.population_size
+    share = min(1.0, used / training.total_env_steps)
+    frac = ga.survivor_start + (ga.survivor_end - ga.survivor_start) * share
     return min(max(2, math.ceil(P * frac)), P - 1), frac
 
 
@@ -127,11 +128,11 @@ class GARun:
         """``grid`` with the spec's payload cells (if any) and only what is connected to them."""
         if not self.spec.objective.payload_cells:
             return grid
-        fixed, types = fixed_cells(self.spec)
+        fixed, types = fixed_cells(self.spec.design, self.spec.objective)
         return satellites(grid[None], fixed, types)[0]
 
     def _next_generation(self) -> None:
-        n_surv, frac = survivor_count(self.spec, self.used)
+        n_surv, frac = survivor_count(self.spec.ga, self.spec.training, self.used)
         ranked = sorted(self.population, key=lambda i: self.records[i]["fitness"], reverse=True)
         survivors = ranked[:n_surv]
         self.generation += 1

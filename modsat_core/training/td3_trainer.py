@@ -23,6 +23,7 @@ from modsat_core.codesign.mdp import CoDesignEnv, Compact, EnvStep, observe_comp
 from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
 from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.limits import replay_capacity
 from modsat_core.training.checkpoint import (
     CHECKPOINT_BUFFER_LIMIT_BYTES,
     CheckpointFn,
@@ -60,8 +61,7 @@ class TD3Run:
         else:
             actor, critic = new_actor(spec), make_critic(self.t.network, N_FEATURES, hidden)
         self.agent = TD3(actor.to(device), critic.to(device), TD3Config.from_training(self.t))
-        capacity = min(self.t.buffer_size, max(self.t.total_env_steps, self.t.batch_size))
-        self.buffer = ReplayBuffer(replay_fields(self.env.N), capacity, device=device)
+        self.buffer = ReplayBuffer(replay_fields(self.env.N), replay_capacity(self.t), device=device)
         self.gen = torch.Generator(device=device).manual_seed(spec.seed)
         self.cpu_gen = torch.Generator().manual_seed(spec.seed + 1)
         self.rng = np.random.default_rng([spec.seed, 3])
@@ -125,7 +125,7 @@ class TD3Run:
     def current_grid(self) -> np.ndarray:
         if self.fixed_grid is not None:
             return self.fixed_grid
-        return design_with(self._eval_actor(), self.spec)
+        return design_with(self._eval_actor(), self.spec.design, self.spec.mission)
 
     def _cpu_actor(self) -> torch.nn.Module:
         a = copy.deepcopy(self.agent.actor).cpu()

@@ -18,7 +18,7 @@ from modsat_core.sim import dynamics as dyn
 from modsat_core.sim.mission import EpisodeDraw
 from modsat_core.sim.morphology import mass_properties
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import Mission, ModuleCatalog
 from modsat_core.verify.flight import ControllerFactory, Flight, commanded_torque
 
 BASILISK_MISSING = "modsat verify --basilisk needs Basilisk: pip install -e '.[basilisk]'"
@@ -85,7 +85,9 @@ class BasiliskSatellite:
     docstring); one Basilisk wheel per body axis per actuator module, in modsat's unit order.
     """
 
-    def __init__(self, spec: JobSpec, grid: np.ndarray, draw: EpisodeDraw, wheels: WheelOptions):
+    def __init__(
+        self, grid: np.ndarray, mission: Mission, modules: ModuleCatalog, draw: EpisodeDraw, wheels: WheelOptions
+    ):
         from Basilisk.architecture import messaging
         from Basilisk.simulation import (
             GravityGradientEffector,
@@ -94,15 +96,14 @@ class BasiliskSatellite:
         )
         from Basilisk.utilities import SimulationBaseClass, macros
 
-        self.spec, self.wheels_opt = spec, wheels
-        m, mods = spec.mission, spec.modules
-        mp = mass_properties(grid, mods.module_mass_kg, mods.module_size_m)
+        self.modules, self.wheels_opt = modules, wheels
+        mp = mass_properties(grid, modules.module_mass_kg, modules.module_size_m)
         self.unit_positions = (mp.positions_B_m + mp.com_grid_m)[mp.types == ACTUATOR]  # from B's origin
         self.K = len(self.unit_positions)
-        self.has_wheels = mods.actuator_model == "reaction-wheel"
+        self.has_wheels = modules.actuator_model == "reaction-wheel"
         self.Js = wheels.inertia_kgm2
-        self.dt_ns = macros.sec2nano(m.physics_dt_s)
-        self.period_ns = self.dt_ns * m.frame_skip
+        self.dt_ns = macros.sec2nano(mission.physics_dt_s)
+        self.period_ns = self.dt_ns * mission.frame_skip
         self.t_ns = 0
 
         self.sim = SimulationBaseClass.SimBaseClass()
@@ -120,13 +121,13 @@ class BasiliskSatellite:
         sc.hub.IHubPntBc_B = hub_I.tolist()
         sc.hub.sigma_BNInit = _ep_to_mrp(draw.q_BN).reshape(3, 1).tolist()
         sc.hub.omega_BN_BInit = np.asarray(draw.omega_B, dtype=float).reshape(3, 1).tolist()
-        r_N, v_N = circular_orbit(m.orbit_altitude_km, draw.orbit_phase_rad)
+        r_N, v_N = circular_orbit(mission.orbit_altitude_km, draw.orbit_phase_rad)
         sc.hub.r_CN_NInit = r_N.reshape(3, 1).tolist()
         sc.hub.v_CN_NInit = v_N.reshape(3, 1).tolist()
         self.sim.AddModelToTask(task, sc, 1)
         self.sc = sc
 
-        if m.gravity_gradient:
+        if mission.gravity_gradient:
             earth = self._add_gravity(sc)
             gg = GravityGradientEffector.GravityGradientEffector()
             gg.ModelTag = "gravityGradient"
@@ -171,7 +172,7 @@ class BasiliskSatellite:
         from Basilisk.simulation import reactionWheelStateEffector
         from Basilisk.utilities import macros, simIncludeRW
 
-        opt, mods = self.wheels_opt, self.spec.modules
+        opt, mods = self.wheels_opt, self.modules
         per = UNITS_PER_EFFECTOR
         for g0 in range(0, self.K, per):
             factory = simIncludeRW.rwFactory()
@@ -209,7 +210,7 @@ class BasiliskSatellite:
 
         if self.wheels_opt.speed_max_rpm is not None:
             return self.wheels_opt.speed_max_rpm * macros.RPM
-        cap = self.spec.modules.momentum_capacity_Nms
+        cap = self.modules.momentum_capacity_Nms
         return cap / self.Js if cap is not None else -1.0
 
     def step(self, tau_cmd_B: np.ndarray) -> None:
@@ -222,7 +223,7 @@ class BasiliskSatellite:
                 payload.motorTorque = cmd.tolist() + [0.0] * (36 - len(cmd))
                 msg.write(payload, self.t_ns)
         else:
-            tau = np.clip(tau_cmd_B, -self.spec.modules.torque_scale_Nm, self.spec.modules.torque_scale_Nm).sum(0)
+            tau = np.clip(tau_cmd_B, -self.modules.torque_scale_Nm, self.modules.torque_scale_Nm).sum(0)
             self.body_torque.extTorquePntB_B = tau.reshape(3, 1).tolist()
         self.t_ns += self.period_ns
         self.sim.ConfigureStopTime(self.t_ns)
@@ -266,20 +267,24 @@ def circular_orbit(altitude_km: float, phase_rad: float) -> tuple[np.ndarray, np
 
 
 def fly_basilisk(
-    spec: JobSpec, grid: np.ndarray, draw: EpisodeDraw, factory: ControllerFactory, wheels: WheelOptions
+    grid: np.ndarray,
+    mission: Mission,
+    modules: ModuleCatalog,
+    draw: EpisodeDraw,
+    factory: ControllerFactory,
+    wheels: WheelOptions,
 ) -> Flight:
     """One slew in Basilisk, the controller called at the control rate from the loop.
 
     The controller sees the Basilisk state through a one-satellite SlewSim that only holds
     it (never steps), so the PD law and the policy run the very code modsat runs.
     """
-    m = spec.mission
-    sat = BasiliskSatellite(spec, grid, draw, wheels)
-    mirror = SlewSim.from_designs([Design.from_grid(grid, spec.modules)], m, spec.modules, dtype=torch.float64)
+    sat = BasiliskSatellite(grid, mission, modules, draw, wheels)
+    mirror = SlewSim.from_designs([Design.from_grid(grid, modules)], mission, modules, dtype=torch.float64)
     mirror.reset([0], [draw])
     controller = factory(mirror)
     t, q, w = [0.0], [sat.q_BN.copy()], [sat.omega_B.copy()]
-    for _ in range(m.episode_steps):
+    for _ in range(mission.episode_steps):
         mirror.state = dyn.State(
             q_BN=torch.from_numpy(sat.q_BN).unsqueeze(0),
             omega_B=torch.from_numpy(sat.omega_B).unsqueeze(0),
@@ -292,6 +297,6 @@ def fly_basilisk(
         t.append(sat.t_s)
         q.append(sat.q_BN.copy())
         w.append(sat.omega_B.copy())
-        if np.linalg.norm(sat.omega_B) > m.rate_limit_rad_s:  # a safety violation ends the slew
+        if np.linalg.norm(sat.omega_B) > mission.rate_limit_rad_s:  # a safety violation ends the slew
             break
     return Flight(np.asarray(t), np.asarray(q), np.asarray(w))

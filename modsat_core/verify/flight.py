@@ -15,15 +15,15 @@ from modsat_core.evaluation.run_files import REPORT_TOLERANCES_DEG  # the same t
 from modsat_core.sim import quaternion as quat
 from modsat_core.sim.mission import EpisodeDraw, draw_episode
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.jobspec import Evaluation, Mission, ModuleCatalog
 
 #: ``controller_factory(sim) -> controller``; ``controller(sim) -> action (B, K, 3) in [-1, 1]``.
 ControllerFactory = Callable[[SlewSim], Callable[[SlewSim], torch.Tensor]]
 
 
-def evaluation_draws(spec: JobSpec, episodes: int) -> list[EpisodeDraw]:
-    """The slews of modsat's final Monte-Carlo evaluation (same seed, same order)."""
-    return [draw_episode(r, spec.mission) for r in episode_rngs(spec.evaluation.seed, episodes)]
+def evaluation_draws(mission: Mission, evaluation: Evaluation, episodes: int) -> list[EpisodeDraw]:
+    """The first ``episodes`` slews of modsat's final Monte-Carlo evaluation (same seed, same order)."""
+    return [draw_episode(r, mission) for r in episode_rngs(evaluation.seed, episodes)]
 
 
 def commanded_torque(action: torch.Tensor, sim: SlewSim) -> torch.Tensor:
@@ -44,17 +44,18 @@ class Flight:
     omega_B: np.ndarray  # (T+1, 3)
 
 
-def fly_modsat(design: Design, spec: JobSpec, draws: list[EpisodeDraw], factory: ControllerFactory) -> list[Flight]:
+def fly_modsat(
+    design: Design, mission: Mission, modules: ModuleCatalog, draws: list[EpisodeDraw], factory: ControllerFactory
+) -> list[Flight]:
     """All slews at once in modsat's simulator (float64); each ends as modsat ends it."""
-    m = spec.mission
     B = len(draws)
-    sim = SlewSim.from_designs([design] * B, m, spec.modules, dtype=torch.float64)
+    sim = SlewSim.from_designs([design] * B, mission, modules, dtype=torch.float64)
     sim.reset(list(range(B)), draws)
     controller = factory(sim)
     hist = [(sim.state.t_s.clone(), sim.state.q_BN.clone(), sim.state.omega_B.clone())]
-    steps = torch.full((B,), m.episode_steps, dtype=torch.long)
+    steps = torch.full((B,), mission.episode_steps, dtype=torch.long)
     done = torch.zeros(B, dtype=torch.bool)
-    for k in range(1, m.episode_steps + 1):
+    for k in range(1, mission.episode_steps + 1):
         with torch.no_grad():
             out = sim.step(controller(sim))
         hist.append((sim.state.t_s.clone(), sim.state.q_BN.clone(), sim.state.omega_B.clone()))
@@ -75,14 +76,13 @@ def _error_angles(q_BN: np.ndarray, q_TN: np.ndarray) -> np.ndarray:
     return quat.error_angle(q_e).numpy()
 
 
-def flight_metrics(f: Flight, q_TN: np.ndarray, spec: JobSpec) -> dict:
+def flight_metrics(f: Flight, q_TN: np.ndarray, mission: Mission) -> dict:
     """Metrics of one slew as modsat defines them (docs/physics.md, "Mission, reward, metrics")."""
-    m = spec.mission
     phi = _error_angles(f.q_BN, q_TN)
     rate = np.linalg.norm(f.omega_B, axis=1)
-    violated = bool(rate[-1] > m.rate_limit_rad_s)
-    settled_rate = rate[-1] <= m.rate_tolerance_rad_s and not violated
-    tol = m.tolerance_deg * quat.DEG
+    violated = bool(rate[-1] > mission.rate_limit_rad_s)
+    settled_rate = rate[-1] <= mission.rate_tolerance_rad_s and not violated
+    tol = mission.tolerance_deg * quat.DEG
     out_of_tol = np.flatnonzero(phi[1:] > tol)
     success = bool(phi[-1] <= tol and settled_rate)
     row = {

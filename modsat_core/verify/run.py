@@ -42,7 +42,7 @@ from modsat_core.sim.mission import EpisodeDraw
 from modsat_core.sim.morphology import mass_properties
 from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.spec.jobspec import JobSpec, parse_spec
+from modsat_core.spec.jobspec import JobSpec, Mission, ModuleCatalog, parse_spec
 from modsat_core.verify.basilisk import (
     BASILISK_MISSING,
     DEFAULT_WHEEL_INERTIA_KGM2,
@@ -131,14 +131,19 @@ def pd_factory(sim: SlewSim) -> PDController:
 
 
 def compare(
-    spec: JobSpec, grid: np.ndarray, draws: list[EpisodeDraw], factory: ControllerFactory, wheels: WheelOptions
+    grid: np.ndarray,
+    mission: Mission,
+    modules: ModuleCatalog,
+    draws: list[EpisodeDraw],
+    factory: ControllerFactory,
+    wheels: WheelOptions,
 ) -> dict:
     """One controller on the same slews in both simulators, side by side."""
-    design = Design.from_grid(grid, spec.modules)
-    ours = fly_modsat(design, spec, draws, factory)
-    theirs = [fly_basilisk(spec, grid, d, factory, wheels) for d in draws]
-    rows_m = [flight_metrics(f, d.q_TN, spec) for f, d in zip(ours, draws)]
-    rows_b = [flight_metrics(f, d.q_TN, spec) for f, d in zip(theirs, draws)]
+    design = Design.from_grid(grid, modules)
+    ours = fly_modsat(design, mission, modules, draws, factory)
+    theirs = [fly_basilisk(grid, mission, modules, d, factory, wheels) for d in draws]
+    rows_m = [flight_metrics(f, d.q_TN, mission) for f, d in zip(ours, draws)]
+    rows_b = [flight_metrics(f, d.q_TN, mission) for f, d in zip(theirs, draws)]
     diffs = [attitude_difference_rad(a, b) for a, b in zip(ours, theirs)]
     return {
         "available": True,
@@ -154,14 +159,13 @@ def compare(
     }
 
 
-def plant_report(spec: JobSpec, grid: np.ndarray, wheels: WheelOptions) -> dict:
+def plant_report(grid: np.ndarray, mission: Mission, modules: ModuleCatalog, wheels: WheelOptions) -> dict:
     """What the Basilisk model holds, for the report (docs/verification.md)."""
     from Basilisk.utilities import macros
 
-    m, mods = spec.mission, spec.modules
-    mp = mass_properties(grid, mods.module_mass_kg, mods.module_size_m)
+    mp = mass_properties(grid, modules.module_mass_kg, modules.module_size_m)
     n_units = int((np.asarray(grid) == ACTUATOR).sum())
-    has_wheels = mods.actuator_model == "reaction-wheel"
+    has_wheels = modules.actuator_model == "reaction-wheel"
     try:
         from Basilisk import __version__ as bsk_version
     except ImportError:
@@ -169,28 +173,28 @@ def plant_report(spec: JobSpec, grid: np.ndarray, wheels: WheelOptions) -> dict:
     return {
         "basilisk_version": bsk_version,
         "integrator": "RK4",
-        "physics_dt_s": m.physics_dt_s,
-        "basilisk_dt_ns": macros.sec2nano(m.physics_dt_s),
-        "frame_skip": m.frame_skip,
+        "physics_dt_s": mission.physics_dt_s,
+        "basilisk_dt_ns": macros.sec2nano(mission.physics_dt_s),
+        "frame_skip": mission.frame_skip,
         "mass_kg": float(mp.mass_kg),
         "center_of_mass_grid_m": np.asarray(mp.com_grid_m).tolist(),
         "inertia_kgm2": np.asarray(mp.inertia_B_kgm2).tolist(),
-        "actuator_model": mods.actuator_model,
+        "actuator_model": modules.actuator_model,
         "wheel_units": n_units,
         "wheels": 3 * n_units if has_wheels else 0,
         "wheel_model": "BalancedWheels" if has_wheels else None,
         "hub_inertia_kgm2": (
             np.asarray(mp.inertia_B_kgm2) + (n_units * wheels.inertia_kgm2 if has_wheels else 0.0) * np.eye(3)
         ).tolist(),
-        "torque_limit_Nm": mods.torque_scale_Nm,
-        "momentum_capacity_Nms": mods.momentum_capacity_Nms,
+        "torque_limit_Nm": modules.torque_scale_Nm,
+        "momentum_capacity_Nms": modules.momentum_capacity_Nms,
         "wheel_options": asdict(wheels) if has_wheels else None,
         "ideal_wheels": wheels.ideal,
-        "gravity_gradient": m.gravity_gradient,
-        "orbit_altitude_km": m.orbit_altitude_km,
+        "gravity_gradient": mission.gravity_gradient,
+        "orbit_altitude_km": mission.orbit_altitude_km,
         "mu_m3_s2": dyn.MU_EARTH_M3_S2,
-        "residual_torque_Nm": list(m.residual_torque_Nm),
-        "residual_torque_std_Nm": m.residual_torque_std_Nm,
+        "residual_torque_Nm": list(mission.residual_torque_Nm),
+        "residual_torque_std_Nm": mission.residual_torque_std_Nm,
     }
 
 
@@ -209,21 +213,22 @@ def verify_run(
     if spec.modules.actuator_model != "reaction-wheel" and wheels != WheelOptions():
         raise ValueError("the run's actuator model is ideal-torque: there are no wheels for the wheel options")
     n = episodes or spec.evaluation.episodes
-    draws = evaluation_draws(spec, n)
+    draws = evaluation_draws(spec.mission, spec.evaluation, n)
+    mission, modules = spec.mission, spec.modules
     if run.policy is not None:
         log(f"policy: {n} slews in modsat and in Basilisk")
-        policy = compare(spec, run.grid, draws, policy_factory(run.policy, spec.modules.torque_scale_Nm), wheels)
+        policy = compare(run.grid, mission, modules, draws, policy_factory(run.policy, modules.torque_scale_Nm), wheels)
     else:
         policy = {"available": False, "reason": run.policy_missing}
         log(f"policy: {run.policy_missing}")
     log(f"PD baseline: {n} slews in modsat and in Basilisk")
-    pd = compare(spec, run.grid, draws, pd_factory, wheels)
+    pd = compare(run.grid, mission, modules, draws, pd_factory, wheels)
     return {
         "episodes": n,
         "seed": spec.evaluation.seed,
         "tolerance_deg": spec.mission.tolerance_deg,
         "controllers": {"policy": policy, "pd_baseline": pd},
-        "plant": plant_report(spec, run.grid, wheels),
+        "plant": plant_report(run.grid, mission, modules, wheels),
     }
 
 

@@ -64,7 +64,7 @@ def untrained_baselines(spec: JobSpec, *, designs: int = 8, episodes: int | None
     """The untrained policy (its own design) and ``designs`` random valid designs flown by it."""
     n = episodes or spec.evaluation.episodes
     actor = untrained_actor(spec)
-    own = _flown(actor, design_with(actor, spec), spec, n)
+    own = _flown(actor, design_with(actor, spec.design, spec.mission), spec, n)
     rng = np.random.default_rng([seed, 17])
     rand = [_flown(actor, g, spec, n) for g in random_valid_designs(rng, spec.design.grid_size, designs)]
     returns = [r["mean_return"] for r in rand]

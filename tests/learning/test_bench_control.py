@@ -45,7 +45,8 @@ def test_the_flat_networks_see_the_flat_state_and_act_on_the_actuator_cells(tiny
         [draw_episode(np.random.default_rng(i), spec.mission, {"omega_B": [0.1, -0.2, 0.05]}) for i in range(3)],
     )
     sim.state.h_B[:] = 0.01 * torch.randn(3, 2, 3, generator=torch.Generator().manual_seed(0))
-    obs = PolicyController(None, grid, spec).observation(sim)  # as the policy's Monte-Carlo sees it
+    # as the policy's Monte-Carlo sees it
+    obs = PolicyController(None, grid, spec.design, spec.mission).observation(sim)
     cells = torch.as_tensor(np.flatnonzero(grid.reshape(-1) == ACTUATOR))
     torch.testing.assert_close(flat_observation(obs, cells), flat_state(sim))
     actor, critic = FlatCellActor(grid, [8, 8]), FlatCellCritic(grid, [8, 8])

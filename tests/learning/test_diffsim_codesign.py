@@ -133,8 +133,8 @@ def codesign_outcome(seed: int) -> dict:
     files = train(JobSpec.model_validate(d)).artifacts()
     policy, kept, spec = load_policy(files["policy.pt"])
     assert kept is not None
-    cube = initial_design(spec)
-    rand = random_designs(spec, 32, seed)
+    cube = initial_design(spec.design, spec.objective)
+    rand = random_designs(spec.design, spec.objective, 32, seed)
     scores = score_designs(spec, policy.double(), [kept, cube, *rand], 8, spec.evaluation.seed + 2, exact=True)
     ev = json.loads(files["evaluation.json"])["policy"]["summary"]
     return {"kept": kept, "cube": cube, "scores": scores, "summary": ev}

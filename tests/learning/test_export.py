@@ -60,7 +60,7 @@ def test_export_matches_in_process_policy(tmp_path, network, odd_control):
     gen = torch.Generator().manual_seed(0)
     for _ in range(5):
         sim.step(torch.rand((16, 3, 3), generator=gen) * 2 - 1)
-    expected = PolicyController(actor, grid, spec)(sim) * spec.modules.torque_scale_Nm
+    expected = PolicyController(actor, grid, spec.design, spec.mission)(sim) * spec.modules.torque_scale_Nm
     assert sim.state.h_B.abs().sum() > 0 and sim.state.omega_B.abs().sum() > 0
 
     (tmp_path / "policy_export.pt").write_bytes(export_torchscript(actor, grid, spec))

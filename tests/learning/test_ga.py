@@ -54,10 +54,10 @@ def test_ga_designs_schedule_and_budget():
 
 def test_survivor_count_follows_the_linear_schedule():
     spec = tiny_spec(algorithm="ga", training__total_env_steps=1000, ga={"population_size": 12})
-    assert survivor_count(spec, 0) == (8, 0.6)  # ceil(12 * 0.6) = 8
-    n, f = survivor_count(spec, 500)
+    assert survivor_count(spec.ga, spec.training, 0) == (8, 0.6)  # ceil(12 * 0.6) = 8
+    n, f = survivor_count(spec.ga, spec.training, 500)
     assert math.isclose(f, 0.3) and n == 4
-    assert survivor_count(spec, 1000)[0] == 2  # never fewer than 2
+    assert survivor_count(spec.ga, spec.training, 1000)[0] == 2  # never fewer than 2
 
 
 def test_mutation_rate():

@@ -83,4 +83,4 @@ def test_with_repair_every_grown_design_flies():
     assert len(finished) >= 16
     assert all(r["valid"] and r["return"] > env.penalty for r in finished)
     torch.manual_seed(1)
-    assert is_valid(design_with(CellActor(N_FEATURES, [16, 16]), spec))
+    assert is_valid(design_with(CellActor(N_FEATURES, [16, 16]), spec.design, spec.mission))

@@ -37,7 +37,7 @@ def test_validate_keeps_the_best_on_the_validation_slews_not_the_curves_first(ti
     for seed in (0, 1):
         torch.manual_seed(seed)
         actor = new_actor(spec)
-        grid = design_with(actor, spec)
+        grid = design_with(actor, spec.design, spec.mission)
         snapshots.append(
             {
                 "env_steps": seed,

@@ -172,7 +172,7 @@ def test_unexplored_episodes_grow_the_policy_s_own_design():
         run = TD3Run(spec)
         for _ in range(spec.design.design_steps):
             run.env.step(run._act(run.env.observe()))
-        return list(run.env.grids.numpy()), design_with(run.agent.actor, spec)
+        return list(run.env.grids.numpy()), design_with(run.agent.actor, spec.design, spec.mission)
 
     grids, own = grown(0.0)
     assert all(np.array_equal(g, own) for g in grids)

@@ -85,8 +85,8 @@ def test_the_asymmetric_design_has_products_of_inertia():
 )
 def test_pd_flies_the_same_slews_in_both(verify, design, model):
     spec, grid, n = slew_spec(model), DESIGNS[design], 3 if design == "cube" else 2
-    draws = verify.evaluation_draws(spec, n)
-    c = verify.compare(spec, grid, draws, verify.pd_factory, verify.WheelOptions())
+    draws = verify.evaluation_draws(spec.mission, spec.evaluation, n)
+    c = verify.compare(grid, spec.mission, spec.modules, draws, verify.pd_factory, verify.WheelOptions())
     assert c["same_success"] and c["max_attitude_difference_rad"] < BOUND_RAD
     assert c["modsat"] == pytest.approx(c["basilisk"], rel=1e-4, abs=1e-6)
     for s in c["slews"]:
@@ -111,7 +111,8 @@ def test_pd_flies_the_same_slews_in_both(verify, design, model):
 
 def test_with_a_whole_number_of_nanoseconds_they_agree_to_roundoff(verify):
     spec = slew_spec(physics_dt_s=1 / 250, episode_steps=60)  # 4,000,000 ns exactly
-    c = verify.compare(spec, ASYMMETRIC, verify.evaluation_draws(spec, 2), verify.pd_factory, verify.WheelOptions())
+    draws = verify.evaluation_draws(spec.mission, spec.evaluation, 2)
+    c = verify.compare(ASYMMETRIC, spec.mission, spec.modules, draws, verify.pd_factory, verify.WheelOptions())
     assert c["max_attitude_difference_rad"] < EXACT_CLOCK_BOUND_RAD
 
 
@@ -120,7 +121,8 @@ def test_basilisk_wheel_limits_make_another_plant(verify):
     spec = slew_spec()
     limited = verify.WheelOptions(speed_max_rpm=100.0, coulomb_friction_Nm=1e-3, viscous_friction_Nms=1e-4)
     assert not limited.ideal and verify.WheelOptions(inertia_kgm2=0.5).ideal
-    c = verify.compare(spec, CUBE, verify.evaluation_draws(spec, 1), verify.pd_factory, limited)
+    draws = verify.evaluation_draws(spec.mission, spec.evaluation, 1)
+    c = verify.compare(CUBE, spec.mission, spec.modules, draws, verify.pd_factory, limited)
     assert c["max_attitude_difference_rad"] > 1e-2
     with pytest.raises(ValueError, match="wheel-speed-max"):
         verify.WheelOptions(speed_max_rpm=-1.0)
