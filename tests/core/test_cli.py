@@ -88,7 +88,9 @@ def test_eval_flies_the_conditions_asked_for(tmp_path):
     from ..learning.test_diffsim import tiny_diffsim
 
     spec_file = tmp_path / "spec.json"
-    spec_file.write_text(tiny_diffsim(evaluation={"episodes": 3, "trajectories": 1, "conditions": []}).model_dump_json())
+    spec_file.write_text(
+        tiny_diffsim(evaluation={"episodes": 3, "trajectories": 1, "conditions": []}).model_dump_json()
+    )
     out = tmp_path / "run"
     assert modsat("train", str(spec_file), "--out", str(out)).returncode == 0
     assert json.loads((out / "evaluation.json").read_text())["conditions"] == []  # the spec asked for none
