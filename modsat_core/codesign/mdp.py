@@ -32,12 +32,13 @@ from modsat_core.sim.morphology import (
 from modsat_core.sim.slew import SlewSim
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.limits import REPLAY_STATE
+from modsat_core.spec.sections import DesignSpace, Mission
 
 
-def effective_invalid_penalty(spec: JobSpec) -> float:
-    """The spec's penalty, lowered if needed below the worst return of any valid design."""
-    low, _ = return_bounds(spec.mission)
-    return min(spec.design.invalid_penalty, low - 1.0)
+def effective_invalid_penalty(design: DesignSpace, mission: Mission) -> float:
+    """The design space's penalty, lowered if needed below the worst return of any valid design."""
+    low, _ = return_bounds(mission)
+    return min(design.invalid_penalty, low - 1.0)
 
 
 def seed_grid(N: int) -> np.ndarray:
@@ -97,7 +98,7 @@ class CoDesignEnv:
         self.B = num_envs
         self.device = torch.device(device)
         self.fixed_grid = None if fixed_grid is None else torch.as_tensor(np.asarray(fixed_grid), device=self.device)
-        self.penalty = effective_invalid_penalty(spec)
+        self.penalty = effective_invalid_penalty(spec.design, spec.mission)
         eye = np.tile(np.eye(3), (num_envs, 1, 1))
         self.sim = SlewSim(
             eye,

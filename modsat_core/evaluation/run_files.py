@@ -111,7 +111,7 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
     out: dict[str, Any] = {"episodes": n, "seed": ev.seed, "design_valid": bool(is_valid(grid))}
     if not out["design_valid"]:
-        pen = effective_invalid_penalty(spec)
+        pen = effective_invalid_penalty(spec.design, spec.mission)
         out["policy"] = {
             "summary": {"episodes": n, "success_rate": 0.0, "mean_return": pen, "std_return": 0.0},
             "episodes": [],

@@ -53,7 +53,7 @@ def _flown(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: in
     }
     mc = evaluate_design(actor, grid, spec, episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
     if mc is None:
-        row.update({"mean_return": effective_invalid_penalty(spec), "success_rate": 0.0})
+        row.update({"mean_return": effective_invalid_penalty(spec.design, spec.mission), "success_rate": 0.0})
     else:
         s = mc.summary(tols)
         row.update({k: s[k] for k in ("mean_return", "success_rate", "safety_violations", "median_final_error_deg")})

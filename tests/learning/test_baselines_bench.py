@@ -29,7 +29,7 @@ def test_untrained_baselines_report_every_design():
     assert out["episodes"] == spec.evaluation.episodes
     rows = out["random_designs"]["designs"]
     assert len(rows) == 4 and all(r["valid"] for r in rows)
-    low = effective_invalid_penalty(spec)
+    low = effective_invalid_penalty(spec.design, spec.mission)
     assert all(r["mean_return"] > low for r in rows)  # valid designs are flown, not penalised
     assert out["random_designs"]["best_mean_return"] == max(r["mean_return"] for r in rows)
     own = out["untrained_policy"]

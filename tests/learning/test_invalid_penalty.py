@@ -37,7 +37,7 @@ def test_penalty_is_below_the_worst_valid_return(penalty, steps, safety, per_rem
         }
     )
     low, high = return_bounds(spec.mission)
-    assert effective_invalid_penalty(spec) < low <= high
+    assert effective_invalid_penalty(spec.design, spec.mission) < low <= high
 
 
 def _run_episodes(spec: JobSpec, design_action, control_action, episodes: int) -> list[dict]:
@@ -54,7 +54,7 @@ def _run_episodes(spec: JobSpec, design_action, control_action, episodes: int) -
 
 def test_worst_valid_episodes_still_beat_an_invalid_one():
     spec = tiny_spec(mission__episode_steps=30)
-    pen = effective_invalid_penalty(spec)
+    pen = effective_invalid_penalty(spec.design, spec.mission)
     empty = torch.tensor([1.0, -1.0, -1.0])  # every cell chooses "empty": an invalid grid
     actuator = torch.tensor([-1.0, -1.0, 1.0])  # every cell an actuator: valid
     invalid = _run_episodes(spec, empty, torch.zeros(3), 4)
