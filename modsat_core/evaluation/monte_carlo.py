@@ -175,8 +175,8 @@ def _fly(
     """Fly the flight's episodes (reset) to their end with ``controller`` and collect them."""
     sim = flight.sim
     episodes = sim.B
-    if isinstance(controller, type):
-        controller = controller(flight.view())
+    if isinstance(controller, type):  # built on what it knows (no noise drawn: every controller meets the same)
+        controller = controller(flight.view(measured=False))
     done = torch.zeros(episodes, dtype=torch.bool, device=sim.device)
     final: dict[str, Tensor] = {}
     rec = min(record, episodes)

@@ -190,15 +190,16 @@ class Flight:
             self._model = (plant, model)
         return self._model[1]
 
-    def view(self) -> SlewSim:
-        """The sim as the controller sees it: measured state, model inertia (the sim itself when
-        neither differs)."""
+    def view(self, measured: bool = True) -> SlewSim:
+        """The sim as the controller sees it: measured state (``measured``: a fresh draw of the noise;
+        else the true state), model inertia; the sim itself when neither differs."""
         plant = self.model_plant()
-        if plant is self.sim.plant and not self.noisy:
+        noisy = self.noisy and measured
+        if plant is self.sim.plant and not noisy:
             return self.sim
         view = copy.copy(self.sim)
         view.plant = plant
-        if self.noisy:
+        if noisy:
             st = self.sim.state
             B, dt = self.sim.B, self.sim.dtype
             g = self.generator

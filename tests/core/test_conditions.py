@@ -125,8 +125,29 @@ def test_tumble_disturbance_and_slew_range_change_the_draws_and_nominal_changes_
 
 
 def test_the_policy_and_pd_fly_the_same_draws_and_noise():
+    """A controller built on the sim (PD, a class) and one that is a function (the policy) see the same
+    measured states at every step, and the same run twice gives the same episodes."""
     d = Design.from_grid(reference_design(3), SPEC.modules)
     conds = [STANDARD_CONDITIONS["combined"]]
+    seen: dict[str, list] = {"built": [], "function": []}
+
+    class Built:
+        def __init__(self, sim):
+            pass
+
+        def __call__(self, sim):
+            seen["built"].append((sim.state.q_BN.clone(), sim.state.omega_B.clone()))
+            return torch.zeros(sim.B, sim.K, 3, dtype=sim.dtype)
+
+    def function(sim):
+        seen["function"].append((sim.state.q_BN.clone(), sim.state.omega_B.clone()))
+        return torch.zeros(sim.B, sim.K, 3, dtype=sim.dtype)
+
+    monte_carlo_conditions(d, Built, MISSION, SPEC.modules, conds, episodes=4, seed=9)
+    monte_carlo_conditions(d, function, MISSION, SPEC.modules, conds, episodes=4, seed=9)
+    assert len(seen["built"]) == len(seen["function"]) == MISSION.episode_steps
+    for (qa, wa), (qb, wb) in zip(seen["built"], seen["function"]):
+        assert torch.equal(qa, qb) and torch.equal(wa, wb)
     a = monte_carlo_conditions(d, PDController, MISSION, SPEC.modules, conds, episodes=4, seed=9)
     b = monte_carlo_conditions(d, PDController, MISSION, SPEC.modules, conds, episodes=4, seed=9)
     assert a["combined"].episodes == b["combined"].episodes
