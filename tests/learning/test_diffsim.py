@@ -23,6 +23,7 @@ from modsat_core.agent.policy_file import load_policy
 from modsat_core.grid import is_valid
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.mission import draw_episode
+from modsat_core.sim.pd import RATE_GAIN_MAX, RATE_GAIN_MAX_NO_DELAY_MARGIN, pd_gains
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.jobspec import JobSpec, SpecError, parse_spec
 from modsat_core.spec.presets import get_preset
@@ -197,6 +198,25 @@ def test_a_policy_file_from_before_the_pd_base_reads_as_the_network_alone():
     _policy, _grid, spec2 = load_policy(buf.getvalue())
     assert spec2.diffsim.base == "none"
     assert JobSpec.model_validate(old["spec"]).diffsim.base == "pd"  # the default a new spec gets
+
+
+def test_a_policy_file_keeps_the_pd_cap_its_controller_was_trained_on():
+    """PD's delay margin (`RATE_GAIN_MAX`) came later: a file records the cap; one without it flew
+    the older cap, and its controller and export keep it."""
+    spec = tiny_diffsim(modules={"torque_scale_Nm": 0.8, "actuator_model": "reaction-wheel"})
+    files = train(spec).artifacts()
+    new = torch.load(io.BytesIO(files["policy.pt"]), weights_only=True)
+    assert new["pd_rate_gain_max"] == RATE_GAIN_MAX
+    del new["pd_rate_gain_max"]
+    buf = io.BytesIO()
+    torch.save(new, buf)
+    actor, grid, spec2 = load_policy(buf.getvalue())
+    assert actor.pd_rate_gain_max == RATE_GAIN_MAX_NO_DELAY_MARGIN
+    sim = SlewSim.from_designs([Design.from_grid(grid, spec2.modules)], spec2.mission, spec2.modules)
+    gains = controller_for(actor, grid, spec2).gains(sim)
+    # this design has the torque for the cap to bind: the two laws differ, and the old file keeps its own
+    assert float(gains.c_per_s) * spec2.mission.control_dt_s == pytest.approx(RATE_GAIN_MAX_NO_DELAY_MARGIN)
+    assert float(pd_gains(sim).c_per_s) * spec2.mission.control_dt_s == pytest.approx(RATE_GAIN_MAX)
 
 
 def test_a_design_pool_flies_many_designs_and_the_controller_sees_each():
