@@ -321,7 +321,7 @@ def paper_mission_run(base: str, updates: int, seed: int = 0) -> dict:
     d["diffsim"]["base"] = base
     steps = updates * 256 * 32
     d["training"].update(total_env_steps=steps, eval_every_steps=steps, eval_episodes=8, select_top_k=1)
-    d["evaluation"].update(episodes=64, trajectories=0)
+    d["evaluation"].update(episodes=64, trajectories=0, conditions=[])  # learning, not robustness
     return json.loads(train(JobSpec.model_validate(d)).artifacts()["evaluation.json"])
 
 

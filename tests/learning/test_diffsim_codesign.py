@@ -129,7 +129,7 @@ def codesign_outcome(seed: int) -> dict:
     steps = CODESIGN_UPDATES * 256 * 32
     d["seed"] = seed
     d["training"].update(total_env_steps=steps, eval_every_steps=steps, eval_episodes=8)
-    d["evaluation"].update(episodes=16, trajectories=0)
+    d["evaluation"].update(episodes=16, trajectories=0, conditions=[])  # learning, not robustness
     files = train(JobSpec.model_validate(d)).artifacts()
     policy, kept, spec = load_policy(files["policy.pt"])
     assert kept is not None
