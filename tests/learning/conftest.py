@@ -10,29 +10,6 @@ from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to
 from modsat_core.training.train import train
 
 
-def cpu_vendor() -> str:
-    try:
-        with open("/proc/cpuinfo") as fh:
-            return next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("vendor_id")), "unknown")
-    except OSError:
-        return "unknown"
-
-
-#: The seeded learning runs that tests/learning/test_control_lands.py and test_codesign_learns.py
-#: replay were measured on AMD EPYC machines (AVX-512). On an Intel Xeon
-#: (also AVX-512; measured 2026-12-04) torch's kernels round differently and the same seeds are
-#: other draws of the recipe: the flat controller reached 91 % of 32 and ended at 41 %, co-design
-#: on `quick` landed 12.5 % (4 of 32). `quick`'s recipe does not land every draw (seeds 1, 2: 61 %,
-#: 0 % of 100, docs/lab/2026-12-05-snapshot-chosen-on-validation.md); these two tests check the
-#: measured runs where they were measured.
-_VENDOR = cpu_vendor()
-on_the_measured_cpu = pytest.mark.skipif(
-    _VENDOR != "AuthenticAMD",
-    reason=f"replays a seeded run measured on AMD EPYC; this CPU ({_VENDOR}) is another draw "
-    "of the recipe (tests/learning/conftest.py)",
-)
-
-
 @pytest.fixture(autouse=True)
 def one_torch_thread():
     """Every learning test trains on one torch thread, as the runs it asserts were measured
