@@ -96,6 +96,14 @@ def test_report_of_both_methods_over_seeds(runs, tmp_path):
         x = c["env_steps"][-1]
         held = [[p["mean_return"] for p in pts if p["env_steps"] <= x][-1] for pts in curves]
         assert c["mean"][-1] == pytest.approx(np.mean(held)) and c["std"][-1] == pytest.approx(np.std(held, ddof=1))
+        # The flight conditions (docs/robustness.md): nominal, then each condition every finished run
+        # with a valid design flew, mean over those runs.
+        valid = [f for f in finals if f["pd_baseline"]]
+        names = [c["name"] for c in valid[0]["conditions"]] if valid else []
+        assert list(a["conditions"]) == (["nominal", *names] if valid else [])
+        for name in names:
+            rates = [next(c for c in f["conditions"] if c["name"] == name)["policy"]["success_rate"] for f in valid]
+            assert a["conditions"][name]["policy"]["success"]["mean"] == pytest.approx(np.mean(rates))
         for d in a["designs"]:
             assert (out / d["png"]).read_bytes().startswith(PNG)
             assert 0 <= d["mirror_planes"] <= 3
@@ -103,6 +111,9 @@ def test_report_of_both_methods_over_seeds(runs, tmp_path):
     table = (out / "table.md").read_text()
     assert table == r.stdout.split("wrote ")[0]
     assert "| RL co-design | 0, 1 |" in table and "| GA | 0, 1 |" in table
+    flown = [label for label, a in result["algorithms"].items() if a["conditions"]]
+    assert flown, "no run of the study flew a valid design: the conditions' table is untested"
+    assert "Flight conditions" in table and f"| {flown[0]} | delay-1 |" in table
 
 
 def test_report_refuses_what_is_not_one_study(runs, tmp_path):
