@@ -12,20 +12,12 @@ import time
 
 import torch
 
+from modsat_core.spec.evaluation import STANDARD_CONDITIONS
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.presets import get_preset
 from modsat_core.training.diffsim import DiffsimRun
 
-RANDOMISE = {
-    "attitude_noise_deg": 0.01,
-    "rate_noise_rad_s": 5e-4,
-    "delay_steps": 1,
-    "inertia_scale": 1.1,
-    "inertia_rotation_deg": 5.0,
-    "torque_fraction": 0.8,
-    "tumble_rad_s": 0.05,
-    "disturbance_Nm": 1e-4,
-}
+RANDOMISE = STANDARD_CONDITIONS["combined"].changes()  # every quantity up to the `combined` condition
 
 
 def main(updates: int = 12) -> None:

@@ -12,6 +12,7 @@ from modsat_core.agent.networks import NETWORKS
 from modsat_core.agent.policy_file import load_policy
 from modsat_core.agent.td3 import ReplayBuffer
 from modsat_core.grid import is_valid
+from modsat_core.spec.evaluation import STANDARD_CONDITIONS
 from modsat_core.training.checkpoint import (
     checkpoint_from_bytes,
     checkpoint_to_bytes,
@@ -277,16 +278,7 @@ def test_design_bc_keeps_the_design_head_near_the_flown_designs():
 
 
 #: Domain randomisation at the standard conditions' magnitudes (`randomise`, docs/robustness.md).
-RANDOMISE = {
-    "attitude_noise_deg": 0.01,
-    "rate_noise_rad_s": 5e-4,
-    "delay_steps": 1,
-    "inertia_scale": 1.1,
-    "inertia_rotation_deg": 5.0,
-    "torque_fraction": 0.8,
-    "tumble_rad_s": 0.05,
-    "disturbance_Nm": 1e-4,
-}
+RANDOMISE = STANDARD_CONDITIONS["combined"].changes()
 
 
 def test_td3_trains_under_domain_randomisation_and_resumes_exactly():
