@@ -23,6 +23,10 @@ The controller is the design's PD law plus the network's correction (``diffsim.b
 default; the gradient flows through the PD law too) or the network alone (`none`); with
 ``diffsim.design_pool`` its training slews fly random designs too (:meth:`DiffsimRun.initial_pool`).
 
+With the spec's ``randomise`` section each training slew flies under conditions drawn for it
+(sensor noise, delay, inertia error, weak wheels, tumble, disturbance; docs/robustness.md) through
+:class:`~modsat_core.sim.conditions.Flight`, and the gradient flows through them.
+
 The budget (``training.total_env_steps``) counts control steps flown in training: one update is
 ``batch_size * window_steps`` of them. docs/diffsim.md has the settings and the measurements.
 """
