@@ -148,6 +148,8 @@ def condition_means(runs: list[SavedRun]) -> dict[str, Any]:
         return {}
     names = [c.name for c in evs[0].conditions]
     names = [n for n in names if all(any(c.name == n for c in ev.conditions) for ev in evs)]
+    if not names:  # runs from before the conditions, or that flew none: no table
+        return {}
     out: dict[str, Any] = {}
     for name in ["nominal", *names]:
         pairs = []

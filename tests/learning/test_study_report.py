@@ -100,7 +100,7 @@ def test_report_of_both_methods_over_seeds(runs, tmp_path):
         # with a valid design flew, mean over those runs.
         valid = [f for f in finals if f["pd_baseline"]]
         names = [c["name"] for c in valid[0]["conditions"]] if valid else []
-        assert list(a["conditions"]) == (["nominal", *names] if valid else [])
+        assert list(a["conditions"]) == (["nominal", *names] if names else [])
         for name in names:
             rates = [next(c for c in f["conditions"] if c["name"] == name)["policy"]["success_rate"] for f in valid]
             assert a["conditions"][name]["policy"]["success"]["mean"] == pytest.approx(np.mean(rates))
