@@ -8,8 +8,9 @@ A :class:`Condition` names a set of departures from the nominal simulation: sens
 actuation delay, an inertia the controller does not know, weaker wheels, a satellite that is
 still turning when the slew starts, a disturbance torque, and slews outside the mission's range.
 The evaluation flies every condition of ``evaluation.conditions`` with the policy and with PD on
-the same slews; the top-level ``randomise`` section is a condition too: each training slew then
-draws every quantity uniformly between nominal and the value it gives (domain randomisation).
+the same slews. The top-level ``randomise`` section (:class:`Randomise`) has the same quantities:
+each training slew draws every one uniformly between nominal and the value it gives (domain
+randomisation).
 
 The standard conditions (:data:`STANDARD_CONDITIONS`) use magnitudes of a small satellite; the
 docs give the source of each number.
@@ -172,11 +173,6 @@ class Randomise(_Section):
     @property
     def active(self) -> bool:
         return self != Randomise()
-
-    @property
-    def senses(self) -> bool:
-        """Whether the controller's measurements or commands differ from the truth (noise, delay)."""
-        return self.attitude_noise_deg > 0 or self.rate_noise_rad_s > 0 or self.delay_steps > 0
 
 
 class Evaluation(_Section):
