@@ -23,7 +23,7 @@ from torch import Tensor
 
 from modsat_core.codesign.features import CellObs, PhysState, cell_observation
 from modsat_core.grid import ACTUATOR, valid_mask
-from modsat_core.sim.conditions import Axes, Flight, RowConditions, perturb_draw, true_inertia
+from modsat_core.sim.conditions import Flight
 from modsat_core.sim.mission import draw_episode, return_bounds
 from modsat_core.sim.morphology import (
     mass_properties_batched,
@@ -153,20 +153,11 @@ class CoDesignEnv:
             return
         m = self.spec.modules
         _, _, I_B = mass_properties_batched(self.grids[idx], m.module_mass_kg, m.module_size_m, dtype=torch.float32)
-        mask = self.grids[idx].reshape(len(idx), -1) == ACTUATOR
+        self.sim.set_plants(idx, I_B, self.grids[idx].reshape(len(idx), -1) == ACTUATOR)
         draws = [draw_episode(self.rngs[int(i)], self.spec.mission) for i in idx.tolist()]
-        r = self.spec.randomise
-        if r.active:
-            n = len(idx)
-            rows, axes = RowConditions.drawn(r, self.cond_rng, n), Axes.draw(self.cond_rng, n)
+        if self.spec.randomise.active:
             I_model = I_B.double().cpu().numpy()
-            self.flight.set_rows(idx, rows, I_B)
-            I_B = torch.as_tensor(true_inertia(I_model, rows, axes), dtype=torch.float32, device=self.device)
-            draws = [
-                perturb_draw(d, rows.tumble_rad_s[k], rows.disturbance_Nm[k], axes.tumble[k], axes.disturbance[k])
-                for k, d in enumerate(draws)
-            ]
-        self.sim.set_plants(idx, I_B, mask)
+            draws = self.flight.randomise(idx, self.spec.randomise, self.cond_rng, I_model, draws)
         self.sim.reset(idx, draws)
         self.flight.reset_rows(idx)
 

@@ -24,8 +24,7 @@ from modsat_core.sim.conditions import (
     RowConditions,
     condition_mission_range,
     max_delay,
-    perturb_draw,
-    true_inertia,
+    perturb,
 )
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
@@ -147,17 +146,13 @@ def monte_carlo_conditions(
         *(np.tile(np.concatenate([getattr(a, f) for a in axes]), (C, 1)) for f in ("inertia", "tumble", "disturbance"))
     )
     I_model = np.tile(np.stack([d.I_B for d in designs]), (C, 1, 1))
-    I_true = true_inertia(I_model, rows, ax)
-    all_designs = [replace(d, I_B=I) for d, I in zip(designs * C, I_true)]
-    sim = SlewSim.from_designs(all_designs, mission, modules, dtype=dtype, device=device)
     draws = []
     for c in conditions:
         m = condition_mission_range(mission, c)
         draws += [draw_episode(r, m) for r in episode_rngs(seed, episodes)]
-    draws = [
-        perturb_draw(d, rows.tumble_rad_s[k], rows.disturbance_Nm[k], ax.tumble[k], ax.disturbance[k])
-        for k, d in enumerate(draws)
-    ]
+    I_true, draws = perturb(I_model, draws, rows, ax)
+    all_designs = [replace(d, I_B=I) for d, I in zip(designs * C, I_true)]
+    sim = SlewSim.from_designs(all_designs, mission, modules, dtype=dtype, device=device)
     sim.reset(list(range(C * episodes)), draws)
     flight = Flight(sim, max_delay=max_delay(conditions), seed=seed)
     kw: dict[str, Any] = dict(dtype=sim.dtype, device=sim.device)

@@ -21,7 +21,6 @@ from modsat_core.grid import ACTUATOR, EMPTY, is_valid
 from modsat_core.sim.morphology import mass_properties
 from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design
-from modsat_core.spec.evaluation import Condition
 from modsat_core.spec.jobspec import JobSpec
 
 #: Final-evaluation tolerances reported beside the mission's own.
@@ -126,19 +125,18 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     out["policy"] = {"summary": mc.summary(tols), "episodes": mc.episodes}
     out["pd_baseline"] = {"summary": pd.summary(tols), "episodes": pd.episodes}
     out["trajectories"] = {"policy": mc.trajectories, "pd_baseline": pd.trajectories}
-    out["conditions"] = condition_table(actor, grid, spec, ev.conditions, n)
+    out["conditions"] = condition_table(actor, grid, design, spec, tols, n)
     return out
 
 
 def condition_table(
-    actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, conditions: list[Condition], episodes: int
+    actor: torch.nn.Module, grid: np.ndarray, design: Design, spec: JobSpec, tols: tuple[float, ...], episodes: int
 ) -> list[dict]:
-    """The policy and PD under each condition, on the evaluation's slews (float64, the mission's
-    physics): one row per condition with each controller's summary."""
+    """The policy and PD under each of ``evaluation.conditions``, on the evaluation's slews (float64,
+    the mission's physics): one row per condition with each controller's summary at ``tols``."""
+    conditions = spec.evaluation.conditions
     if not conditions:
         return []
-    design = Design.from_grid(grid, spec.modules)
-    tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
     kw: dict[str, Any] = dict(episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
     m, mods = spec.mission, spec.modules
     pol = monte_carlo_conditions(design, controller_for(actor, grid, spec), m, mods, conditions, **kw)

@@ -1,4 +1,4 @@
-"""Flying a controller under flight conditions (:mod:`modsat_core.spec.conditions`), row by row.
+"""Flying a controller under flight conditions (:mod:`modsat_core.spec.evaluation`), row by row.
 
 The simulator flies the true satellite; :class:`Flight` stands between it and the controller:
 
@@ -10,7 +10,7 @@ The simulator flies the true satellite; :class:`Flight` stands between it and th
 - its command reaches the wheels ``delay_steps`` control steps late (zero torque before the first
   command arrives), clipped to the wheel units' box and scaled by ``torque_fraction``.
 
-The initial tumble and the disturbance torque change the slew's draw (:func:`perturb_draw`). With
+The initial tumble and the disturbance torque change the slew's draw (:func:`perturb`). With
 no row perturbed, :meth:`Flight.act` is ``controller(sim)`` itself. Everything is torch and
 differentiable, so the first-order learner trains through it (domain randomisation).
 """
@@ -82,9 +82,6 @@ class RowConditions:
     def take(self, idx: np.ndarray) -> RowConditions:
         return RowConditions(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
 
-    def __len__(self) -> int:
-        return len(self.delay_steps)
-
 
 @dataclass(frozen=True)
 class Axes:
@@ -106,14 +103,21 @@ def true_inertia(I_model: np.ndarray, rows: RowConditions, axes: Axes) -> np.nda
     return rows.inertia_scale[:, None, None] * (R @ I_model @ np.swapaxes(R, -1, -2))
 
 
-def perturb_draw(draw: EpisodeDraw, tumble_rad_s: float, disturbance_Nm: float, tumble_axis, dist_axis) -> EpisodeDraw:
-    """The slew ``draw`` starting with a body rate ``tumble_rad_s`` about ``tumble_axis`` and a constant
-    torque ``disturbance_Nm`` about ``dist_axis`` added to its own."""
-    return replace(
-        draw,
-        omega_B=draw.omega_B + tumble_rad_s * np.asarray(tumble_axis),
-        tau_residual_B=draw.tau_residual_B + disturbance_Nm * np.asarray(dist_axis),
-    )
+def perturb(
+    I_model: np.ndarray, draws: list[EpisodeDraw], rows: RowConditions, axes: Axes
+) -> tuple[np.ndarray, list[EpisodeDraw]]:
+    """What rows flown under ``rows`` really are: their true inertia (:func:`true_inertia`) and their
+    slews ``draws`` starting with the tumble about ``axes.tumble`` and with the disturbance torque
+    about ``axes.disturbance`` added to their own."""
+    out = [
+        replace(
+            d,
+            omega_B=d.omega_B + rows.tumble_rad_s[k] * axes.tumble[k],
+            tau_residual_B=d.tau_residual_B + rows.disturbance_Nm[k] * axes.disturbance[k],
+        )
+        for k, d in enumerate(draws)
+    ]
+    return true_inertia(I_model, rows, axes), out
 
 
 def _small_rotation(v: Tensor) -> Tensor:
@@ -165,6 +169,21 @@ class Flight:
         self.delay = _put(self.delay, idx, delay)
         self.fraction = _put(self.fraction, idx, torch.as_tensor(rows.torque_fraction, **kw))
         self._flags()
+
+    def randomise(
+        self, idx: Tensor, r: Randomise, rng: np.random.Generator, I_model: np.ndarray, draws: list[EpisodeDraw]
+    ) -> list[EpisodeDraw]:
+        """Rows ``idx``, about to start the slews ``draws`` on designs of inertia ``I_model`` (b, 3, 3),
+        fly under conditions drawn from ``r`` with ``rng`` (domain randomisation): the sim flies their
+        true inertia (on its current wheel units), the controller knows ``I_model``. Returns the draws
+        with the tumble and the disturbance (the caller resets the sim on them)."""
+        n = len(idx)
+        rows, axes = RowConditions.drawn(r, rng, n), Axes.draw(rng, n)
+        I_true, draws = perturb(I_model, draws, rows, axes)
+        dev = self.sim.device
+        self.sim.set_plants(idx.to(dev), torch.as_tensor(I_true).to(dev), self.sim.plant.actuator_mask[idx.to(dev)])
+        self.set_rows(idx, rows, torch.as_tensor(I_model))
+        return draws
 
     def _flags(self) -> None:
         self._model = None

@@ -47,7 +47,7 @@ from modsat_core.artefacts import ProgressRecord
 from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
 from modsat_core.grid import random_valid_design
-from modsat_core.sim.conditions import Axes, Flight, RowConditions, perturb_draw, true_inertia
+from modsat_core.sim.conditions import Flight
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.diffsim import Diffsim
@@ -196,16 +196,8 @@ class DiffsimRun:
         draws = [draw_episode(self.rng, self.spec.mission) for _ in range(n)]
         r = self.spec.randomise
         if r.active:
-            rows, axes = RowConditions.drawn(r, self.rng, n), Axes.draw(self.rng, n)
             I_model = np.stack([self.pool[i].I_B for i in self.row_design[idx].tolist()])
-            dev = self.sim.device
-            I_true = torch.as_tensor(true_inertia(I_model, rows, axes)).to(dev)
-            self.sim.set_plants(idx.to(dev), I_true, self.sim.plant.actuator_mask[idx.to(dev)])
-            self.flight.set_rows(idx, rows, torch.as_tensor(I_model))
-            draws = [
-                perturb_draw(dr, rows.tumble_rad_s[k], rows.disturbance_Nm[k], axes.tumble[k], axes.disturbance[k])
-                for k, dr in enumerate(draws)
-            ]
+            draws = self.flight.randomise(idx, r, self.rng, I_model, draws)
         self.sim.reset(idx.tolist(), draws)
         self.flight.reset_rows(idx)
 
