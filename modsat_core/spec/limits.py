@@ -12,7 +12,8 @@ buffer (exact: the compact replay row, :data:`REPLAY_STATE` and :data:`REPLAY_RO
 buffer itself is built from), one TD3 update's activations
 (features of both states, every layer's output kept for the backward pass, actor, target
 actor and four critic passes), the per-step features of the training envs, and the
-Monte-Carlo evaluation's batch. docs/service.md ("Limits") lists the defaults.
+Monte-Carlo evaluation's batch (the nominal slews, or the slews of every flight condition flown
+at once, whichever is larger). docs/service.md ("Limits") lists the defaults.
 """
 
 from __future__ import annotations
@@ -129,11 +130,14 @@ def estimate(spec: JobSpec) -> Estimate:
     per_cell_width = H if t.network == "per-module" else SET_CELL_WIDTH
     update = 4 * t.batch_size * (C * (2 * F + _UPDATE_PASSES * per_cell_width) + _UPDATE_PASSES * H)
     step = 4 * t.num_envs * C * (F + 3) * _STEP_COPIES
-    evaluation = 4 * max(e.episodes, t.eval_episodes) * C * (F + 3) * _STEP_COPIES
+    # The final evaluation flies the nominal slews in one batch and every flight condition's in
+    # another (episodes x conditions rows).
+    conditions = len(e.conditions)
+    evaluation = 4 * max(e.episodes * max(1, conditions), t.eval_episodes) * C * (F + 3) * _STEP_COPIES
     # Curve points (one every eval_every_steps, and one at the end), then the final Monte-Carlo
-    # evaluation, flown by the policy and by the PD baseline.
+    # evaluation, nominal and under each condition, flown by the policy and by the PD baseline.
     curve_points = t.total_env_steps // t.eval_every_steps + 1
-    evaluation_steps = m.episode_steps * (curve_points * t.eval_episodes + 2 * e.episodes)
+    evaluation_steps = m.episode_steps * (curve_points * t.eval_episodes + 2 * e.episodes * (1 + conditions))
     if is_diffsim(spec):  # no replay, no per-cell features: one window's graph
         d = spec.diffsim
         substeps = m.frame_skip if d.substeps is None else d.substeps
@@ -242,13 +246,15 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
         )
     if limits.max_evaluation_steps is not None and est.evaluation_steps > limits.max_evaluation_steps:
         curve = (t.total_env_steps // t.eval_every_steps + 1) * t.eval_episodes
-        loc = ("training", "eval_every_steps") if curve >= 2 * e.episodes else ("evaluation", "episodes")
+        final = 2 * e.episodes * (1 + len(e.conditions))
+        loc = ("training", "eval_every_steps") if curve >= final else ("evaluation", "episodes")
         out.append(
             (
                 loc,
                 (
                     f"{'.'.join(loc)}: the evaluations would fly {est.evaluation_steps:,} control steps "
-                    f"({curve:,} curve episodes and 2 x {e.episodes:,} final ones, {m.episode_steps:,} steps each), "
+                    f"({curve:,} curve episodes and 2 x {e.episodes:,} x {1 + len(e.conditions)} final ones: "
+                    f"nominal and {len(e.conditions)} evaluation.conditions; {m.episode_steps:,} steps each), "
                     f"more than this service allows ({limits.max_evaluation_steps:,}, MODSAT_MAX_EVALUATION_STEPS)"
                 ),
             )

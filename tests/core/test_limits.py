@@ -82,3 +82,20 @@ def test_codesign_counts_the_designs_it_flies_at_once():
     problems = limits.check(parse_spec(d), limits.Limits())
     assert problems and problems[0][0] == ("diffsim", "design_batch"), problems
     assert "designs flown at once" in problems[0][1]
+
+
+def test_flight_conditions_count_in_the_evaluation_s_cost():
+    """The final evaluation flies every condition's slews in one batch (episodes x conditions rows),
+    policy and PD: a spec the nominal evaluation fits can be refused for its conditions, naming
+    `evaluation.episodes` and saying how many conditions it flies."""
+    none = limits.estimate(_spec(evaluation={"episodes": 1000, "conditions": []}))
+    nine = limits.estimate(_spec(evaluation={"episodes": 1000}))  # the nine standard conditions
+    steps = get_preset("quick-td3").mission.episode_steps
+    assert nine.evaluation_steps - none.evaluation_steps == 2 * 1000 * 9 * steps
+    assert nine.evaluation_bytes == 9 * none.evaluation_bytes
+    big = {"episodes": 10_000, "trajectories": 0}
+    assert limits.check(_spec(evaluation={**big, "conditions": []}), limits.Limits()) == []
+    many = [{"name": f"late-{k}", "delay_steps": 1 + k % 10} for k in range(20)]
+    problems = limits.check(_spec(evaluation={**big, "conditions": many}), limits.Limits())
+    assert problems and problems[0][0] == ("evaluation", "episodes"), problems
+    assert "20 evaluation.conditions" in " ".join(p[1] for p in problems)
