@@ -122,7 +122,8 @@ def _cmd_bench_codesign(args: argparse.Namespace) -> int:
         if getattr(args, name) < 1:
             raise SystemExit(f"modsat bench codesign: --{name} must be at least 1")
     prepare_report_path(args.out)
-    print_report(bench_codesign(args.preset, args.seed, args.designs, args.slews), args.out)
+    report = bench_codesign(args.preset, args.seed, args.designs, args.slews, args.design_gradient, not args.no_ga)
+    print_report(report, args.out)
     return 0
 
 
@@ -242,5 +243,12 @@ def add_bench_parsers(sub) -> None:
     bcd.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     bcd.add_argument("--designs", type=int, default=100, help="random designs (default 100)")
     bcd.add_argument("--slews", type=int, default=16, help="slews each design flies (default 16)")
+    bcd.add_argument(
+        "--design-gradient",
+        choices=["score-function", "relaxed"],
+        default=None,
+        help="override the preset's diffsim.design_gradient (docs/diffsim.md compares them)",
+    )
+    bcd.add_argument("--no-ga", action="store_true", help="leave out the GA row (halves the bench's time)")
     bcd.add_argument("--out", help="also write the JSON report to this file")
     bcd.set_defaults(func=_cmd_bench_codesign, threads=None)

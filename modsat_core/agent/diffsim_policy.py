@@ -139,7 +139,7 @@ class DiffsimController:
             g = self.gains(sim)
             tau = pd_torque(q_BT, st.omega_B, h_tot, plant.I_B, g.lam_per_s, g.c_per_s, g.omega_lim_rad_s, plant.box_Nm)
             f = tau / plant.box_Nm + f  # SlewSim clips the action to [-1, 1]
-        return f.unsqueeze(1) * plant.actuator_mask.unsqueeze(-1).to(sim.dtype)
+        return f.unsqueeze(1) * plant.slots.unsqueeze(-1).to(sim.dtype)
 
 
 class ExportedDiffsimController(nn.Module):

@@ -55,7 +55,8 @@ class Plant:
     Attributes:
         I_B: (B, 3, 3) inertia about the centre of mass, kg m^2.
         I_B_inv: (B, 3, 3) its inverse.
-        actuator_mask: (B, K) bool, which wheel-unit slots exist.
+        actuator_mask: (B, K) bool, which wheel-unit slots exist (or float weights in [0, 1],
+            a relaxed grid's fraction of a unit in each slot).
         tau_max_Nm: per-axis torque limit of one wheel unit.
         h_max_Nms: per-axis momentum capacity of one wheel unit (``inf``: unlimited).
         wheels: True for the reaction-wheel model, False for the paper's ideal torque.
@@ -82,6 +83,11 @@ class Plant:
     def n_actuators(self) -> Tensor:
         """(B,) number of wheel units of each satellite."""
         return self.actuator_mask.sum(dim=1)
+
+    @property
+    def slots(self) -> Tensor:
+        """(B, K) bool, the slots that hold a wheel unit (whole or, weighted, a fraction of one)."""
+        return self.actuator_mask != 0
 
     @property
     def box_Nm(self) -> Tensor:
@@ -144,9 +150,12 @@ def wheel_torque(h_B: Tensor, tau_cmd_B: Tensor, plant: Plant, dt_s: float) -> T
     the per-axis limit, masked to existing units, and (with a capacity) limited so the
     wheel momentum stays within ``[-h_max, h_max]`` at the end of the step.
     """
-    u = -tau_cmd_B.clamp(-plant.tau_max_Nm, plant.tau_max_Nm) * plant.actuator_mask.unsqueeze(-1)
+    mask = plant.actuator_mask.unsqueeze(-1)
+    u = -tau_cmd_B.clamp(-plant.tau_max_Nm, plant.tau_max_Nm) * mask
     if plant.wheels and math.isfinite(plant.h_max_Nms):
-        u = torch.minimum(torch.maximum(u, (-plant.h_max_Nms - h_B) / dt_s), (plant.h_max_Nms - h_B) / dt_s)
+        # a weighted slot (a relaxed grid's) is that fraction of a unit: of its capacity too
+        h_max = plant.h_max_Nms * mask if mask.is_floating_point() else plant.h_max_Nms
+        u = torch.minimum(torch.maximum(u, (-h_max - h_B) / dt_s), (h_max - h_B) / dt_s)
     return u
 
 

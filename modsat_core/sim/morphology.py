@@ -102,19 +102,30 @@ def mass_properties_batched(
     Designs with no module get mass 0, com 0 and the identity as a harmless inertia (the
     caller masks them out as invalid).
     """
-    B, N = grids.shape[0], grids.shape[1]
-    occ = (grids > 0).to(dtype).reshape(B, -1)  # (B, N^3)
-    idx = torch.arange(N, device=grids.device, dtype=dtype) * module_size_m
+    B = grids.shape[0]
+    return mass_properties_of_occupancy((grids > 0).to(dtype).reshape(B, -1), module_mass_kg, module_size_m)
+
+
+def mass_properties_of_occupancy(
+    occ: Tensor, module_mass_kg: float = 1.0, module_size_m: float = 0.1
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Mass properties of B grids given as occupancies (B, N^3), the cells in C order, each a number
+    in [0, 1]: a module (1), none (0), or a relaxed grid's probability of one, a cell's mass scaled
+    by it. Differentiable in ``occ``; on 0/1 occupancies it is the grid's mass properties. Returns
+    mass (B,), com (B, 3) and the inertia about it (B, 3, 3); an empty row gets the identity."""
+    B, dtype = occ.shape[0], occ.dtype
+    N = round(occ.shape[1] ** (1.0 / 3.0))
+    idx = torch.arange(N, device=occ.device, dtype=dtype) * module_size_m
     gi, gj, gk = torch.meshgrid(idx, idx, idx, indexing="ij")
     p = torch.stack((gi, gj, gk), dim=-1).reshape(-1, 3)  # (N^3, 3)
     count = occ.sum(dim=1)
-    safe = count.clamp(min=1.0)
+    safe = count.clamp(min=1e-12)
     com = occ @ p / safe.unsqueeze(-1)  # (B, 3)
     r = p.unsqueeze(0) - com.unsqueeze(1)  # (B, N^3, 3)
     w = occ.unsqueeze(-1) * module_mass_kg
     rr = (w * r * r).sum(dim=(1, 2))  # (B,)
     outer = torch.einsum("bni,bnj->bij", w * r, r)
-    eye = torch.eye(3, dtype=dtype, device=grids.device)
+    eye = torch.eye(3, dtype=dtype, device=occ.device)
     own = module_mass_kg * module_size_m**2 / 6.0
     inertia = (count * own + rr).reshape(B, 1, 1) * eye - outer
     inertia = torch.where((count > 0).reshape(B, 1, 1), inertia, eye.expand(B, 3, 3))

@@ -108,4 +108,4 @@ class PDController:
     def __call__(self, sim: SlewSim) -> Tensor:
         plant = sim.plant
         per_unit = self.torque(sim) / plant.box_Nm
-        return per_unit.unsqueeze(1) * plant.actuator_mask.unsqueeze(-1)
+        return per_unit.unsqueeze(1) * plant.slots.unsqueeze(-1)

@@ -139,12 +139,18 @@ class SlewSim:
         dtype: torch.dtype = torch.float32,
         device: str | torch.device = "cpu",
     ):
-        """B satellites given by their inertia (B, 3, 3) and wheel-unit slots (B, K) bool."""
+        """B satellites given by their inertia (B, 3, 3) and wheel-unit slots (B, K) bool.
+
+        A floating-point ``actuator_mask`` weighs each slot instead (in [0, 1]): a relaxed grid's
+        probability of a wheel unit in a cell, whose torque and momentum the slot scales by it, so
+        that the flight is differentiable in the weights (and in ``I_B``; `diffsim-codesign`'s
+        relaxed design gradient)."""
         self.mission, self.modules = mission, modules
         self.dtype, self.device = dtype, torch.device(device)
         kw: dict[str, Any] = dict(dtype=dtype, device=self.device)
         I_B = torch.as_tensor(I_B, **kw).clone()
-        mask = torch.as_tensor(actuator_mask, dtype=torch.bool, device=self.device).clone()
+        mask = torch.as_tensor(actuator_mask, device=self.device)
+        mask = mask.to(dtype).clone() if mask.is_floating_point() else mask.to(torch.bool).clone()
         self.B, self.K = mask.shape
         wheels = modules.actuator_model == "reaction-wheel"
         cap = modules.momentum_capacity_Nms
@@ -226,7 +232,7 @@ class SlewSim:
         self.phi_prev = _put(self.phi_prev, idx, quat.error_angle(q_e))
         self.metrics.reset(idx)
         theta, I_axis, tau_axis = slew_axis_properties(
-            q_e, self.plant.I_B[idx].detach(), self.plant.n_actuators[idx], self.plant.tau_max_Nm
+            q_e, self.plant.I_B[idx].detach(), self.plant.n_actuators[idx].detach(), self.plant.tau_max_Nm
         )
         self.metrics.theta0_rad[idx] = theta
         self.metrics.bound_s[idx] = eigenaxis_bound_s(theta, I_axis, tau_axis, self.mission.rate_limit_rad_s)
@@ -289,7 +295,7 @@ class SlewSim:
     def step(self, action: Tensor) -> StepOut:
         """Advance all satellites one control step; action (B, K, 3) in [-1, 1]."""
         m, acc = self.mission, self.metrics
-        a = action.to(self.dtype).clamp(-1.0, 1.0) * self.plant.actuator_mask.unsqueeze(-1)
+        a = action.to(self.dtype).clamp(-1.0, 1.0) * self.plant.slots.unsqueeze(-1)
         tau_cmd = a * self.plant.tau_max_Nm
         self.state, tau_c = dyn.control_step(self.state, self.plant, tau_cmd, m.physics_dt_s, m.frame_skip)
         self.steps += 1

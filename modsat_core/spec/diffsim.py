@@ -111,6 +111,16 @@ class Diffsim(_Section):
     design_every: int = Field(
         4, ge=1, le=10_000, description="`diffsim-codesign`: controller updates between design updates."
     )
+    design_gradient: Literal["score-function", "relaxed"] = Field(
+        "score-function",
+        description=(
+            "`diffsim-codesign`'s gradient for the design logits. `score-function`: REINFORCE on the "
+            "drawn designs' objectives. `relaxed`: backpropagated through a relaxed grid (each cell's "
+            "mass and wheel torque scaled by its probabilities) flown `design_slews` slews by the "
+            "controller, its soft time out of tolerance plus the expected prices (docs/diffsim.md "
+            "compares them)."
+        ),
+    )
     design_lr: float = Field(
         0.1, gt=0.0, le=10.0, description="`diffsim-codesign`: Adam learning rate of the per-cell type logits."
     )

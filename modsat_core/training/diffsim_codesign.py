@@ -30,21 +30,29 @@ wins; the final evaluation flies it with the controller at the end of training, 
 from __future__ import annotations
 
 import copy
+import math
 from typing import Any
 
 import numpy as np
 import torch
+from torch import Tensor
 
+from modsat_core.agent.diffsim_policy import DiffsimController
 from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.evaluation.monte_carlo import monte_carlo
 from modsat_core.grid import ACTUATOR, EMPTY, STRUCTURE, flood_fill
-from modsat_core.sim.slew import Design
+from modsat_core.sim.mission import draw_episode
+from modsat_core.sim.morphology import mass_properties_of_occupancy
+from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.jobspec import DesignSpace, JobSpec
 from modsat_core.spec.objective import Objective
 from modsat_core.training.diffsim import DiffsimRun, training_mission
 
 #: Candidates for the kept design besides the distribution's mode: the run's best draws.
 TOP_DRAWS = 3
+#: Width, in natural-log units, of the relaxed objective's soft tolerance step (within a factor
+#: e**0.5 of the tolerance the step is between 27 % and 73 % of the way).
+RELAXED_SOFTNESS = 0.5
 
 
 def objective_s(episodes: list[dict], grid: np.ndarray, objective: Objective, episode_s: float) -> float:
@@ -168,15 +176,66 @@ class DiffsimCodesignRun(DiffsimRun):
         policy = copy.deepcopy(self.policy).cpu().eval()
         return score_designs(self.spec, policy.double() if exact else policy, grids, slews, seed, exact)
 
+    def relaxed_objective(self, seed: int) -> Tensor:
+        """The relaxed grid's objective, differentiable in the logits (``design_gradient`` `relaxed`).
+
+        Each free cell holds ``p_structure + p_actuator`` of a module's mass and ``p_actuator`` of a
+        wheel unit (a weighted slot of the simulator, its torque and momentum scaled by it); the
+        fixed cells are what they are. Connectivity is not relaxed: a probable cell counts even
+        where the cells that would join it to the payload are improbable. The controller (its
+        weights held) flies this satellite on ``design_slews`` slews for the mission's episode in
+        the training physics, float64, with the gradient through every step; the objective is the
+        mean soft time out of tolerance (each step's ``dt (1 - s(phi) s(w))``, with
+        ``s(x) = sigmoid(-ln(x / tol) / RELAXED_SOFTNESS)`` for the angle and the rate against their
+        tolerances) plus the prices of the expected modules and wheel units."""
+        spec, m = self.spec, self.spec.modules
+        obj, mission = spec.objective, spec.mission
+        p = torch.softmax(self.logits, dim=-1)
+        fixed = torch.as_tensor(self.fixed.reshape(-1))
+        ftypes = torch.as_tensor(self.fixed_types.reshape(-1))
+        occ = torch.where(fixed, (ftypes != EMPTY).double(), p[:, STRUCTURE] + p[:, ACTUATOR])
+        wheel = torch.where(fixed, (ftypes == ACTUATOR).double(), p[:, ACTUATOR])
+        _, _, I_B = mass_properties_of_occupancy(occ.unsqueeze(0), m.module_mass_kg, m.module_size_m)
+        S = self.d.design_slews
+        sim = SlewSim(
+            I_B.expand(S, 3, 3),
+            wheel.unsqueeze(0).expand(S, -1),
+            training_mission(mission, self.d.substeps),
+            m,
+            dtype=torch.float64,
+        )
+        rng = np.random.default_rng([seed, 9])
+        sim.reset(list(range(S)), [draw_episode(rng, mission) for _ in range(S)])
+        policy = copy.deepcopy(self.policy).cpu().double().eval().requires_grad_(False)
+        controller = DiffsimController(policy, mission.rate_limit_rad_s, self.d.base)
+        log_tol = math.log(math.radians(mission.tolerance_deg))
+        log_rate_tol = math.log(mission.rate_tolerance_rad_s)
+        out = torch.zeros((), dtype=torch.float64)
+        for _ in range(mission.episode_steps):
+            sim.step(controller(sim))
+            q = sim.error_quaternion()
+            phi = 2.0 * torch.atan2(torch.sqrt((q[:, 1:] ** 2).sum(-1) + 1e-24), q[:, 0])
+            w = torch.sqrt((sim.state.omega_B**2).sum(-1) + 1e-24)
+            inside = torch.sigmoid(-(torch.log(phi) - log_tol) / RELAXED_SOFTNESS) * torch.sigmoid(
+                -(torch.log(w) - log_rate_tol) / RELAXED_SOFTNESS
+            )
+            out = out + (1.0 - inside).mean() * mission.control_dt_s
+        return out + obj.module_price_s * occ.sum() + obj.wheel_price_s * wheel.sum()
+
     def design_update(self) -> None:
         """Draw, score, step the logits, refresh the designs training flies (module docstring)."""
         M = self.d.design_batch
         grids, raw = self.draw(M)
         seed = int(self.design_rng.integers(2**31))
         J = np.asarray(self.score(list(grids), self.d.design_slews, seed, exact=False))
-        adv = torch.as_tensor((J - J.mean()) / (J.std() + 1e-8))
-        loss = (adv * self.log_prob(raw)).mean()  # descending it lowers the expected objective
         self.design_opt.zero_grad(set_to_none=True)
+        relaxed: float | None = None
+        if self.d.design_gradient == "relaxed":
+            loss = self.relaxed_objective(seed)
+            relaxed = float(loss.detach())
+        else:
+            adv = torch.as_tensor((J - J.mean()) / (J.std() + 1e-8))
+            loss = (adv * self.log_prob(raw)).mean()  # descending it lowers the expected objective
         loss.backward()
         self.design_opt.step()
         for g, j in sorted(zip(list(grids), J.tolist(), strict=True), key=lambda x: x[1])[:TOP_DRAWS]:
@@ -200,6 +259,7 @@ class DiffsimCodesignRun(DiffsimRun):
                 "mean_objective_s": float(J.mean()),
                 "best_objective_s": float(J.min()),
                 "valid_draws": int(sum((g == ACTUATOR).any() for g in grids)),
+                **({} if relaxed is None else {"relaxed_objective_s": relaxed}),
                 "entropy_nats": float(-(p * np.log(p + 1e-12)).sum(-1)[~self.fixed.reshape(-1)].mean()),
                 "mode": mode.tolist(),
                 "modules": int((mode != EMPTY).sum()),

@@ -28,7 +28,7 @@ def evaluation_draws(mission: Mission, evaluation: Evaluation, episodes: int) ->
 
 def commanded_torque(action: torch.Tensor, sim: SlewSim) -> torch.Tensor:
     """Per-unit body torque command (B, K, 3) N m from an action, as :meth:`SlewSim.step` does."""
-    a = action.to(sim.dtype).clamp(-1.0, 1.0) * sim.plant.actuator_mask.unsqueeze(-1)
+    a = action.to(sim.dtype).clamp(-1.0, 1.0) * sim.plant.slots.unsqueeze(-1)
     return a * sim.plant.tau_max_Nm
 
 

@@ -12,6 +12,10 @@ import torch
 from modsat_core.agent.diffsim_policy import N_DESIGN_INPUTS, DiffsimPolicy
 from modsat_core.agent.policy_file import load_policy
 from modsat_core.grid import ACTUATOR, EMPTY, STRUCTURE, is_valid
+from modsat_core.sim.mission import draw_episode
+from modsat_core.sim.morphology import mass_properties, mass_properties_of_occupancy
+from modsat_core.sim.pd import PDController
+from modsat_core.sim.slew import SlewSim
 from modsat_core.spec.jobspec import JobSpec, SpecError, parse_spec
 from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
 from modsat_core.training.diffsim_codesign import DiffsimCodesignRun, objective_s, satellites
@@ -150,3 +154,93 @@ def test_codesign_moves_the_design_and_beats_what_chance_gives():
     assert not np.array_equal(out["kept"], out["cube"])
     assert kept_s < cube_s and kept_s < min(rand_s), (kept_s, cube_s, sorted(rand_s)[:3])
     assert out["summary"]["success_rate"] >= 0.95 and out["summary"]["safety_violations"] == 0, out["summary"]
+
+
+# ----------------------------------------------------------------------------- the relaxed gradient
+
+
+def test_a_relaxed_grid_has_the_grids_mass_properties_at_its_corners():
+    rng = np.random.default_rng(0)
+    grids = rng.integers(0, 3, size=(5, 3, 3, 3))
+    grids[:, 1, 1, 1] = ACTUATOR
+    occ = torch.as_tensor((grids > 0).reshape(5, -1), dtype=torch.float64)
+    mass, com, inertia = mass_properties_of_occupancy(occ, 2.0, 0.1)
+    for b, g in enumerate(grids):
+        mp = mass_properties(g, 2.0, 0.1)
+        assert float(mass[b]) == pytest.approx(mp.mass_kg)
+        assert torch.allclose(com[b], torch.as_tensor(mp.com_grid_m), atol=1e-14)
+        assert torch.allclose(inertia[b], torch.as_tensor(mp.inertia_B_kgm2), atol=1e-14)
+    # half a module in a cell: the mass grows by half a module and the inertia by between nothing
+    # and what a whole module would add about the same axis
+    half = occ[:1].clone()
+    cell = int(np.flatnonzero(occ[0].numpy() == 0)[0])
+    half[0, cell] = 0.5
+    whole = half.clone()
+    whole[0, cell] = 1.0
+    m0, m_half, m_whole = (float(mass_properties_of_occupancy(o, 2.0, 0.1)[0][0]) for o in (occ[:1], half, whole))
+    assert m_half == pytest.approx(m0 + 1.0) and m_whole == pytest.approx(m0 + 2.0)
+
+
+def test_a_weighted_wheel_slot_is_that_fraction_of_a_unit():
+    """Two half-weighted slots fly exactly as one whole unit, and a weight of 1.0 as the unit's
+    boolean slot: the relaxed grid's satellite is the discrete one at its corners."""
+    spec = tiny_codesign()
+    mission = spec.mission.model_copy(update={"episode_steps": 30})
+    modules = spec.modules.model_copy(update={"momentum_capacity_Nms": 0.02})
+    I_B = torch.diag(torch.tensor([0.3, 0.4, 0.5], dtype=torch.float64)).unsqueeze(0)
+    rng = np.random.default_rng(3)
+    draw = draw_episode(rng, mission)
+
+    def fly(mask) -> torch.Tensor:
+        sim = SlewSim(I_B, mask, mission, modules, dtype=torch.float64)
+        sim.reset([0], [draw])
+        pd = PDController(sim)
+        for _ in range(30):
+            sim.step(pd(sim))
+        return torch.cat((sim.state.q_BN, sim.state.omega_B, sim.state.h_B.sum(1)), dim=-1)
+
+    whole = fly(np.array([[True]]))
+    assert torch.equal(fly(torch.tensor([[1.0]], dtype=torch.float64)), whole)
+    assert torch.allclose(fly(torch.tensor([[0.5, 0.5]], dtype=torch.float64)), whole, atol=1e-12)
+    # a fraction of a unit gives that fraction of the torque (at the capacity too)
+    quarter = fly(torch.tensor([[0.25]], dtype=torch.float64))
+    assert not torch.allclose(quarter, whole, atol=1e-6)
+
+
+def test_the_relaxed_objectives_gradient_equals_finite_differences():
+    spec = tiny_codesign(mission__episode_steps=16, diffsim__design_gradient="relaxed")
+    run = DiffsimCodesignRun(spec)
+    with torch.no_grad():
+        run.logits.copy_(torch.as_tensor(np.random.default_rng(1).normal(0, 0.5, size=(8, 3))))
+    J = run.relaxed_objective(seed=7)
+    J.backward()
+    grad = run.logits.grad.clone()
+    assert torch.isfinite(grad).all() and grad.abs().sum() > 0
+    assert grad[torch.as_tensor(run.fixed.reshape(-1))].abs().max() == 0  # the payload's cells
+    free = np.flatnonzero(~run.fixed.reshape(-1))
+    eps = 1e-6
+    for cell, kind in [(free[0], ACTUATOR), (free[1], STRUCTURE), (free[-1], EMPTY), (free[2], ACTUATOR)]:
+        with torch.no_grad():
+            run.logits[cell, kind] += eps
+            up = float(run.relaxed_objective(seed=7))
+            run.logits[cell, kind] -= 2 * eps
+            down = float(run.relaxed_objective(seed=7))
+            run.logits[cell, kind] += eps
+        assert float(grad[cell, kind]) == pytest.approx((up - down) / (2 * eps), rel=1e-5, abs=1e-9)
+
+
+def test_a_relaxed_run_moves_the_logits_by_its_gradient_and_resumes_the_same():
+    spec = tiny_codesign(diffsim__design_gradient="relaxed")
+    result = train(spec)
+    files = result.artifacts()
+    records = json.loads(files["curve.json"])["designs"]
+    assert len(records) == 3 and all(r["relaxed_objective_s"] > 0 for r in records)
+    assert is_valid(np.asarray(json.loads(files["design.json"])["grid"]))
+    ckpts: list[dict] = []
+    stops = iter([False, False, False, True])
+    assert train(spec, on_checkpoint=ckpts.append, should_stop=lambda: next(stops, False)).stopped
+    resumed = train(spec, checkpoint=checkpoint_from_bytes(checkpoint_to_bytes(ckpts[-1])))
+    assert resumed.artifacts()["curve.json"] == files["curve.json"]
+    # not the score function's run: the same draws, another step for the logits
+    other = json.loads(train(tiny_codesign()).artifacts()["curve.json"])["designs"]
+    assert [r["entropy_nats"] for r in other] != [r["entropy_nats"] for r in records]
