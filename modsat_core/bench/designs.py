@@ -71,14 +71,44 @@ def fly_designs(
         mc = monte_carlo(part, controller, mission, modules, episodes=len(part), seed=evaluation.seed)
         episodes += mc.episodes
     ok = np.array([bool(e["success"]) for e in episodes]).reshape(len(grids), slews)
+    bad = np.array([bool(e["safety_violation"]) for e in episodes]).reshape(len(grids), slews)
     settle = [e["settling_time_s"] for e in episodes if e["success"]]
+    missed = [i for i in range(len(grids)) if not ok[i].all()]
     return {
         "slews": len(episodes),
         "success_rate": float(ok.mean()),
         "designs_all_landed": float(ok.all(axis=1).mean()),
         "worst_design_success": float(ok.mean(axis=1).min()),
         "median_settling_time_s": float(np.median(settle)) if settle else None,
-        "safety_violations": int(sum(bool(e["safety_violation"]) for e in episodes)),
+        "safety_violations": int(bad.sum()),
+        # the designs that did not land every slew, named (the first MAX_NAMED of them)
+        "designs_missed": [
+            {
+                "index": i,
+                "success_rate": float(ok[i].mean()),
+                "safety_violations": int(bad[i].sum()),
+                **design_figures(grids[i], modules),
+            }
+            for i in missed[:MAX_NAMED]
+        ],
+    }
+
+
+#: How many of the designs that missed a slew a report names.
+MAX_NAMED = 10
+
+
+def design_figures(grid: np.ndarray, modules: ModuleCatalog) -> dict[str, Any]:
+    """What sets how a design flies: its grid, modules, wheel units, principal moments and the
+    torque-to-inertia ratio of its weakest principal axis (1/s^2)."""
+    d = Design.from_grid(grid, modules)
+    moments = np.linalg.eigvalsh(d.I_B)
+    return {
+        "grid": np.asarray(grid).tolist(),
+        "modules": int((np.asarray(grid) != 0).sum()),
+        "wheels": d.n_actuators,
+        "principal_moments_kgm2": [round(float(m), 6) for m in moments],
+        "weakest_axis_accel_rad_s2": round(d.n_actuators * modules.torque_scale_Nm / float(moments[-1]), 6),
     }
 
 
