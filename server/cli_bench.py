@@ -122,7 +122,11 @@ def _cmd_bench_codesign(args: argparse.Namespace) -> int:
         if getattr(args, name) < 1:
             raise SystemExit(f"modsat bench codesign: --{name} must be at least 1")
     prepare_report_path(args.out)
-    report = bench_codesign(args.preset, args.seed, args.designs, args.slews, args.design_gradient, not args.no_ga)
+    if args.design_batch is not None and not 2 <= args.design_batch <= 4096:
+        raise SystemExit("modsat bench codesign: --design-batch must be between 2 and 4096")
+    report = bench_codesign(
+        args.preset, args.seed, args.designs, args.slews, args.design_gradient, not args.no_ga, args.design_batch
+    )
     print_report(report, args.out)
     return 0
 
@@ -248,6 +252,9 @@ def add_bench_parsers(sub) -> None:
         choices=["score-function", "relaxed"],
         default=None,
         help="override the preset's diffsim.design_gradient (docs/diffsim.md compares them)",
+    )
+    bcd.add_argument(
+        "--design-batch", type=int, default=None, help="override the preset's diffsim.design_batch (draws per update)"
     )
     bcd.add_argument("--no-ga", action="store_true", help="leave out the GA row (halves the bench's time)")
     bcd.add_argument("--out", help="also write the JSON report to this file")

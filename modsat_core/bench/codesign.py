@@ -94,15 +94,23 @@ _DESIGN_RECORD = ("updates", "mean_objective_s", "best_objective_s", "relaxed_ob
 
 
 def bench_codesign(
-    preset: str, seed: int, designs: int, slews: int, design_gradient: str | None = None, ga: bool = True
+    preset: str,
+    seed: int,
+    designs: int,
+    slews: int,
+    design_gradient: str | None = None,
+    ga: bool = True,
+    design_batch: int | None = None,
 ) -> dict[str, Any]:
-    """The report of the module docstring; ``design_gradient`` overrides the preset's, and without
-    ``ga`` the GA row is left out."""
+    """The report of the module docstring; ``design_gradient`` and ``design_batch`` override the
+    preset's, and without ``ga`` the GA row is left out."""
     torch.set_num_threads(1)
     d = get_preset(preset).model_dump(mode="json")
     d["seed"] = seed
     if design_gradient is not None:
         d["diffsim"]["design_gradient"] = design_gradient
+    if design_batch is not None:
+        d["diffsim"]["design_batch"] = design_batch
     spec = parse_spec(d)
     files, train_s, wall = timed_train(spec)
     policy, kept, spec = load_policy(files["policy.pt"])
@@ -121,6 +129,7 @@ def bench_codesign(
         "preset": preset,
         "seed": seed,
         "design_gradient": spec.diffsim.design_gradient,
+        "design_batch": spec.diffsim.design_batch,
         "train_s": round(train_s, 1),
         "wall_s": round(wall, 1),
         "slews": slews,

@@ -147,6 +147,10 @@ def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     assert r.returncode != 0 and "not diffsim-codesign" in r.stderr and "Traceback" not in r.stderr
     r = modsat("bench", "codesign", "--preset", "nope")
     assert r.returncode != 0 and "unknown preset 'nope'" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "codesign", "--design-batch", "1")
+    assert r.returncode != 0 and "--design-batch must be between 2" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "codesign", "--design-gradient", "exact")
+    assert r.returncode == 2 and "invalid choice: 'exact'" in r.stderr and "Traceback" not in r.stderr
     out = str(tmp_path / "study")
     r = modsat("study", "--preset", "quick-td3", "--seeds", "0", "--algorithms", "diffsim-control", "--out", out)
     assert r.returncode == 2 and "design.fixed_design" in r.stderr and "Traceback" not in r.stderr
