@@ -170,8 +170,7 @@ def test_a_relaxed_grid_has_the_grids_mass_properties_at_its_corners():
         assert float(mass[b]) == pytest.approx(mp.mass_kg)
         assert torch.allclose(com[b], torch.as_tensor(mp.com_grid_m), atol=1e-14)
         assert torch.allclose(inertia[b], torch.as_tensor(mp.inertia_B_kgm2), atol=1e-14)
-    # half a module in a cell: the mass grows by half a module and the inertia by between nothing
-    # and what a whole module would add about the same axis
+    # half a module in an empty cell weighs half a module
     half = occ[:1].clone()
     cell = int(np.flatnonzero(occ[0].numpy() == 0)[0])
     half[0, cell] = 0.5
