@@ -41,6 +41,13 @@ DIFFSIM_BYTES_PER_STEP = 2048
 #: ... and per wheel unit and RK4 step (the units' momentum and its RK4 stages; an upper bound, as
 #: the measurement above includes 1-3 units). A design pool can hold up to N^3 units a design.
 DIFFSIM_BYTES_PER_UNIT_SUBSTEP = 160
+#: `diffsim-codesign` with ``design_gradient`` `relaxed`: the relaxed flight keeps the graph of a
+#: whole episode of ``design_slews`` slews in float64, each with a slot for every cell's wheel unit.
+#: Per slew, control step and RK4 step it is bounded by twice a training window's bytes (float64);
+#: besides, the graph keeps per control step what does not grow with the slews. Measured (peak RSS
+#: growth of one relaxed objective and its backward pass, 500 steps of 5 substeps): 3x3x3, 16 and
+#: 64 slews, 440 and 647 MiB; 5x5x5, 1.6 GiB with 64 slews; the bound below gives 2.2-4.5x that.
+RELAXED_BYTES_PER_STEP = 2**20
 #: What a run needs besides the estimate above: the interpreter, torch, the simulator.
 BASE_BYTES = 600 * 2**20
 GIB = 2**30
@@ -101,10 +108,12 @@ class Estimate:
     #: `diffsim-codesign`: the largest batch of designs flown at once (a design update's draws x
     #: slews, or the kept design's candidates on the validation slews).
     design_bytes: int = 0
+    #: ... and the relaxed design gradient's flight with its graph (``design_gradient`` `relaxed`).
+    relaxed_bytes: int = 0
 
     @property
     def memory_bytes(self) -> int:
-        flights = max(self.step_bytes, self.evaluation_bytes, self.design_bytes)
+        flights = max(self.step_bytes, self.evaluation_bytes, self.design_bytes, self.relaxed_bytes)
         return BASE_BYTES + self.replay_bytes + self.update_bytes + flights
 
     def as_dict(self) -> dict:
@@ -115,6 +124,7 @@ class Estimate:
             "step_bytes": self.step_bytes,
             "evaluation_bytes": self.evaluation_bytes,
             "design_bytes": self.design_bytes,
+            "relaxed_bytes": self.relaxed_bytes,
             "train_env_steps": self.train_env_steps,
             "evaluation_steps": self.evaluation_steps,
         }
@@ -145,7 +155,12 @@ def estimate(spec: JobSpec) -> Estimate:
         units = spec.design.grid_size**3 if d.design_pool or fixed is None else sum(c == 2 for c in _cells(fixed))
         per_substep = DIFFSIM_BYTES_PER_SUBSTEP + units * DIFFSIM_BYTES_PER_UNIT_SUBSTEP
         window = d.batch_size * d.window_steps * (substeps * per_substep + DIFFSIM_BYTES_PER_STEP)
-        design = 0
+        design = relaxed = 0
+        if spec.algorithm == "diffsim-codesign" and d.design_gradient == "relaxed":
+            cells = spec.design.grid_size**3  # a slot for every cell's wheel unit
+            per_slew_step = substeps * (DIFFSIM_BYTES_PER_SUBSTEP + cells * DIFFSIM_BYTES_PER_UNIT_SUBSTEP)
+            per_slew_step += DIFFSIM_BYTES_PER_STEP
+            relaxed = m.episode_steps * (2 * d.design_slews * per_slew_step + RELAXED_BYTES_PER_STEP)
         if spec.algorithm == "diffsim-codesign":
             # A flight without a graph keeps one step's tensors a slew: at most what the window keeps
             # of an RK4 step, twice over for float64 (the validation slews of the kept design's
@@ -154,6 +169,7 @@ def estimate(spec: JobSpec) -> Estimate:
             design = 2 * per_substep * flights
         return Estimate(
             design_bytes=design,
+            relaxed_bytes=relaxed,
             replay_bytes=0,
             update_bytes=window,
             step_bytes=0,
@@ -198,6 +214,7 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
         sizes = {
             ("diffsim", "batch_size"): est.update_bytes,
             ("diffsim", "design_batch"): est.design_bytes,
+            ("diffsim", "design_slews"): est.relaxed_bytes,
             ("evaluation", "episodes"): est.evaluation_bytes,
         }
         loc = max(sizes, key=lambda k: sizes[k])
@@ -208,7 +225,9 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
                     f"{'.'.join(loc)}: this run would need about {_gib(est.memory_bytes)} of memory, more than this "
                     f"service allows ({_gib(limits.max_memory_bytes)}, MODSAT_MAX_JOB_MEMORY_GIB): one gradient "
                     f"window {_gib(est.update_bytes)} ({d.batch_size} slews x {d.window_steps} steps), evaluation "
-                    f"{_gib(est.evaluation_bytes)}, designs flown at once {_gib(est.design_bytes)}; "
+                    f"{_gib(est.evaluation_bytes)}, designs flown at once {_gib(est.design_bytes)}"
+                    + (f", the relaxed design flight {_gib(est.relaxed_bytes)}" if est.relaxed_bytes else "")
+                    + "; "
                     f"lower {'.'.join(loc)}"
                 ),
             )

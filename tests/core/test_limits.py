@@ -84,6 +84,24 @@ def test_codesign_counts_the_designs_it_flies_at_once():
     assert "designs flown at once" in problems[0][1]
 
 
+def test_the_relaxed_design_flight_counts_its_graph():
+    """The relaxed design gradient keeps a whole episode's graph of `design_slews` slews: the presets
+    with it fit, and above the measured peaks (440 MiB: 3x3x3, 16 slews, 500 steps); too many slews
+    are refused naming `diffsim.design_slews`."""
+    for name in ("diffsim-3x3x3", "diffsim-5x5x5"):
+        d = get_preset(name).model_dump(mode="json")
+        d["diffsim"]["design_gradient"] = "relaxed"
+        assert limits.check(parse_spec(d), limits.Limits()) == [], name
+    d = get_preset("diffsim-3x3x3").model_dump(mode="json")
+    assert limits.estimate(parse_spec(d)).relaxed_bytes == 0  # the score function keeps no such graph
+    d["diffsim"].update(design_gradient="relaxed", design_slews=16)
+    assert limits.estimate(parse_spec(d)).relaxed_bytes > 440 * 2**20
+    d["diffsim"]["design_slews"] = 1000
+    problems = limits.check(parse_spec(d), limits.Limits())
+    assert problems and problems[0][0] == ("diffsim", "design_slews"), problems
+    assert "the relaxed design flight" in problems[0][1]
+
+
 def test_flight_conditions_count_in_the_evaluation_s_cost():
     """The final evaluation flies every condition's slews in one batch (episodes x conditions rows),
     policy and PD: a spec the nominal evaluation fits can be refused for its conditions, naming
