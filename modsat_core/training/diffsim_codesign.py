@@ -21,7 +21,7 @@ With ``diffsim.design_gradient`` `relaxed` the logits move instead by the gradie
 grid's objective backpropagated through the simulator (:meth:`DiffsimCodesignRun.relaxed_objective`);
 the draws still feed the controller's training and the kept-design candidates. Measured on
 `diffsim-3x3x3` seeds 0-2 and `diffsim-5x5x5` (docs/diffsim.md, "Score function or relaxed grid"):
-the relaxed gradient keeps better designs at 2-3x the wall time, but its distribution's mode carries
+the relaxed gradient keeps better designs at 2-4x the wall time, but its distribution's mode carries
 fewer wheel units than the designs it prices (the relaxed optimum is fractional; on 5x5x5 none), so
 the score function, whose distribution converges to a valid design, stays the default.
 
