@@ -152,21 +152,23 @@ def estimate(spec: JobSpec) -> Estimate:
         d = spec.diffsim
         substeps = m.frame_skip if d.substeps is None else d.substeps
         fixed = spec.design.fixed_design
-        units = spec.design.grid_size**3 if d.design_pool or fixed is None else sum(c == 2 for c in _cells(fixed))
+        codesign = spec.algorithm == "diffsim-codesign"  # its draws may hold a unit in every cell
+        if d.design_pool or fixed is None or codesign:
+            units = spec.design.grid_size**3
+        else:
+            units = sum(c == 2 for c in _cells(fixed))
         per_substep = DIFFSIM_BYTES_PER_SUBSTEP + units * DIFFSIM_BYTES_PER_UNIT_SUBSTEP
-        window = d.batch_size * d.window_steps * (substeps * per_substep + DIFFSIM_BYTES_PER_STEP)
+        per_slew_step = substeps * per_substep + DIFFSIM_BYTES_PER_STEP
+        window = d.batch_size * d.window_steps * per_slew_step
         design = relaxed = 0
-        if spec.algorithm == "diffsim-codesign" and d.design_gradient == "relaxed":
-            cells = spec.design.grid_size**3  # a slot for every cell's wheel unit
-            per_slew_step = substeps * (DIFFSIM_BYTES_PER_SUBSTEP + cells * DIFFSIM_BYTES_PER_UNIT_SUBSTEP)
-            per_slew_step += DIFFSIM_BYTES_PER_STEP
-            relaxed = m.episode_steps * (2 * d.design_slews * per_slew_step + RELAXED_BYTES_PER_STEP)
-        if spec.algorithm == "diffsim-codesign":
+        if codesign:
             # A flight without a graph keeps one step's tensors a slew: at most what the window keeps
             # of an RK4 step, twice over for float64 (the validation slews of the kept design's
             # candidates, at most 1 + TOP_DRAWS = 4 of them).
             flights = max(d.design_batch * d.design_slews, 4 * e.episodes)
             design = 2 * per_substep * flights
+            if d.design_gradient == "relaxed":  # a whole episode's graph, float64
+                relaxed = m.episode_steps * (2 * d.design_slews * per_slew_step + RELAXED_BYTES_PER_STEP)
         return Estimate(
             design_bytes=design,
             relaxed_bytes=relaxed,

@@ -49,7 +49,7 @@ from modsat_core.sim.morphology import mass_properties_of_occupancy
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.jobspec import DesignSpace, JobSpec
 from modsat_core.spec.objective import Objective
-from modsat_core.training.diffsim import DiffsimRun, training_mission
+from modsat_core.training.diffsim import DiffsimRun, _smooth_norm, training_mission
 
 #: Candidates for the kept design besides the distribution's mode: the run's best draws.
 TOP_DRAWS = 3
@@ -217,8 +217,8 @@ class DiffsimCodesignRun(DiffsimRun):
         for _ in range(mission.episode_steps):
             sim.step(controller(sim))
             q = sim.error_quaternion()
-            phi = 2.0 * torch.atan2(torch.sqrt((q[:, 1:] ** 2).sum(-1) + 1e-24), q[:, 0])
-            w = torch.sqrt((sim.state.omega_B**2).sum(-1) + 1e-24)
+            phi = 2.0 * torch.atan2(_smooth_norm(q[:, 1:], 1e-24), q[:, 0])
+            w = _smooth_norm(sim.state.omega_B, 1e-24)
             inside = torch.sigmoid(-(torch.log(phi) - log_tol) / RELAXED_SOFTNESS) * torch.sigmoid(
                 -(torch.log(w) - log_rate_tol) / RELAXED_SOFTNESS
             )
