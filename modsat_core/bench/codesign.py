@@ -50,8 +50,10 @@ def initial_design(design_space: DesignSpace, objective: Objective) -> np.ndarra
     return np.where(fixed, types, reference_design(design_space.grid_size)).astype(np.int64)
 
 
-def _figures(grid: np.ndarray) -> dict[str, int]:
-    return {"modules": int((grid != EMPTY).sum()), "wheels": int((grid == ACTUATOR).sum())}
+def design_counts(grid: np.ndarray) -> dict[str, int]:
+    """A design's modules and wheel units, as the bench reports name them."""
+    g = np.asarray(grid)
+    return {"modules": int((g != EMPTY).sum()), "wheels": int((g == ACTUATOR).sum())}
 
 
 #: The GA of the comparison: generations of 8 designs, each its own `diffsim-control` run of 16
@@ -82,7 +84,7 @@ def ga_row(spec: JobSpec, seed: int, cmp_seed: int, slews: int) -> dict[str, Any
     ev = json.loads(files["evaluation.json"])["policy"]["summary"]
     return {
         "objective_s": score,
-        **_figures(grid),
+        **design_counts(grid),
         "wall_s": round(wall, 1),
         "designs_evaluated": len(json.loads(files["curve.json"])["designs"]),
         "own_policy_success": ev.get(f"success_rate_at_{ga_spec.mission.tolerance_deg:g}_deg"),
@@ -134,8 +136,8 @@ def bench_codesign(
         "wall_s": round(wall, 1),
         "slews": slews,
         "objective_s": {
-            "kept": {"diffsim": learned[0], "pd": pd[0], **_figures(kept)},
-            "initial_cube": {"diffsim": learned[1], "pd": pd[1], **_figures(cube)},
+            "kept": {"diffsim": learned[0], "pd": pd[0], **design_counts(kept)},
+            "initial_cube": {"diffsim": learned[1], "pd": pd[1], **design_counts(cube)},
             "random": {
                 "designs": designs,
                 "diffsim_best": float(r_learned.min()),
@@ -144,7 +146,7 @@ def bench_codesign(
                 "pd_best": float(r_pd.min()),
                 "pd_median": float(np.median(r_pd)),
                 "pd_worst": float(r_pd.max()),
-                "best_by_diffsim": _figures(rand[best]),
+                "best_by_diffsim": design_counts(rand[best]),
             },
         },
         "ga": ga_row(spec, seed, cmp_seed, slews) if ga else None,

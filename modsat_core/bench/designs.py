@@ -19,6 +19,7 @@ import torch
 
 from modsat_core.agent.policy import controller_for
 from modsat_core.agent.policy_file import load_policy
+from modsat_core.bench.codesign import design_counts
 from modsat_core.bench.learners import _cpu_model, timed_train
 from modsat_core.evaluation.monte_carlo import monte_carlo
 from modsat_core.grid import random_valid_design
@@ -105,8 +106,7 @@ def design_figures(grid: np.ndarray, modules: ModuleCatalog) -> dict[str, Any]:
     moments = np.linalg.eigvalsh(d.I_B)
     return {
         "grid": np.asarray(grid).tolist(),
-        "modules": int((np.asarray(grid) != 0).sum()),
-        "wheels": d.n_actuators,
+        **design_counts(grid),
         "principal_moments_kgm2": [round(float(m), 6) for m in moments],
         "weakest_axis_accel_rad_s2": round(d.n_actuators * modules.torque_scale_Nm / float(moments[-1]), 6),
     }
