@@ -202,6 +202,12 @@ def _print_evaluation(summary: dict, stream) -> None:
         for r in rows:
             line = "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
             print("  " + line, file=stream)
+        for f in s.flight_failures:
+            print(
+                f"NOT FLIGHT-READY under {f.name}: the policy lands {100 * f.policy_success:.0f}% of the slews, "
+                f"PD {100 * f.pd_success:.0f}% (docs/robustness.md; train with `randomise`)",
+                file=stream,
+            )
 
 
 def _conditions_arg(text: str) -> list:

@@ -115,7 +115,7 @@ class CoDesignEnv:
         self.ep_return = torch.zeros(num_envs, device=self.device)
         # Domain randomisation (the `randomise` section): the flight between the actor and the sim,
         # its conditions drawn per flight from a stream of their own.
-        self.flight = Flight(self.sim, max_delay=spec.randomise.delay_steps, seed=seed)
+        self.flight = Flight(self.sim, max_delay=spec.randomise.delay_steps if spec.randomise.active else 0, seed=seed)
         self.cond_rng = np.random.default_rng([seed, 3])
         self._reset(torch.arange(num_envs, device=self.device))
 
@@ -153,7 +153,7 @@ class CoDesignEnv:
             return
         m = self.spec.modules
         _, _, I_B = mass_properties_batched(self.grids[idx], m.module_mass_kg, m.module_size_m, dtype=torch.float32)
-        self.sim.set_plants(idx, I_B, self.grids[idx].reshape(len(idx), -1) == ACTUATOR)
+        self.sim.set_plants(idx, I_B, self.grids[idx].reshape(len(idx), -1) >= ACTUATOR)
         draws = [draw_episode(self.rngs[int(i)], self.spec.mission) for i in idx.tolist()]
         if self.spec.randomise.active:
             I_model = I_B.double().cpu().numpy()

@@ -136,6 +136,13 @@ STANDARD_CONDITIONS: dict[str, Condition] = {
 }
 
 
+#: Domain randomisation up to the `combined` condition's magnitudes: what the first-order presets
+#: train under by default (docs/robustness.md, "Flight-ready by default").
+FLIGHT_READY: dict[str, Any] = {
+    k: v for k, v in STANDARD_CONDITIONS["combined"].changes().items() if k not in ("slew_min_deg", "slew_max_deg")
+}
+
+
 def resolve_conditions(items: list[Any]) -> list[Any]:
     """A list of conditions where a string names a standard one (``"delay-1"``); unknown names and
     repeated names are errors that list what exists."""
@@ -159,7 +166,18 @@ class Randomise(_Section):
     the value given here (an integer delay: each of 0..delay_steps equally likely; the inertia scale
     between ``1 / inertia_scale`` and ``inertia_scale``, so either side of the model). Its fields mean
     what :class:`Condition`'s do; slews outside the mission's range are not drawn in training. All
-    nominal (the default): no randomisation."""
+    nominal (the default of a spec written from scratch): no randomisation. The first-order presets
+    set the `combined` condition's magnitudes (:data:`FLIGHT_READY`), so that what they ship flies
+    under every standard condition; ``enabled`` false turns it off without listing every field."""
+
+    enabled: bool = Field(
+        True,
+        description=(
+            "false: train on the nominal model whatever the magnitudes below say. The first-order presets "
+            "(`quick`, `diffsim-*`) randomise at the `combined` condition's magnitudes by default; "
+            '`{"randomise": {"enabled": false}}` in a job\'s overrides trains them nominally.'
+        ),
+    )
 
     attitude_noise_deg: float = Field(0.0, ge=0.0, le=10.0, description="Largest attitude noise std drawn.")
     rate_noise_rad_s: float = Field(0.0, ge=0.0, le=1.0, description="Largest rate noise std drawn.")
@@ -172,7 +190,7 @@ class Randomise(_Section):
 
     @property
     def active(self) -> bool:
-        return self != Randomise()
+        return self.enabled and self.model_copy(update={"enabled": True}) != Randomise()
 
 
 class Evaluation(_Section):

@@ -7,6 +7,7 @@ choice, written here and in docs/spec.md.
 
 from __future__ import annotations
 
+from modsat_core.spec.evaluation import FLIGHT_READY
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.sections import PAPER_TAU_3X3X3_NM, PAPER_TAU_5X5X5_NM
 
@@ -99,6 +100,7 @@ def _diffsim_codesign(n: int, updates: int) -> JobSpec:
             "design": {"grid_size": n},
             "modules": {"torque_scale_Nm": DIFFSIM_CODESIGN_TAU_NM[n], "actuator_model": "reaction-wheel"},
             "mission": {"reward": _HOLD_REWARD},
+            "randomise": FLIGHT_READY,
             "objective": {
                 "module_price_s": 0.05,
                 "wheel_price_s": 0.5,
@@ -135,8 +137,9 @@ PRESETS: dict[str, JobSpec] = {
     "ga-3x3x3": _paper(3, PAPER_TAU_3X3X3_NM, "ga"),
     "ga-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "ga"),
     # The demo, what a newcomer tries first: the full cube flown by the first-order learner on a
-    # short mission (120 control steps, 30-90 deg slews, 1 deg), 100 updates: about a minute on one
-    # core (docs/diffsim.md has what it lands).
+    # short mission (120 control steps, 30-90 deg slews, 1 deg), 100 updates, trained under the flight
+    # conditions (`randomise`, like every first-order preset): a few minutes on one core (the README's
+    # preset table has what it lands and how long it takes on which CPU).
     "quick": JobSpec.model_validate(
         {
             "name": "quick",
@@ -144,6 +147,7 @@ PRESETS: dict[str, JobSpec] = {
             "design": {"grid_size": 3, "fixed_design": _CUBE_3},
             "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
             "mission": _QUICK_MISSION,
+            "randomise": FLIGHT_READY,
             "training": {
                 "total_env_steps": 100 * 256 * 32,
                 "eval_every_steps": 25 * 256 * 32,

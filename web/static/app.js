@@ -547,6 +547,7 @@ function conditionsTable(ev) {
   if (!conds.length) return null;
   const pol = ev.policy && ev.policy.summary, pd = ev.pd_baseline && ev.pd_baseline.summary;
   const rows = [{ name: "nominal", changes: {}, policy: pol, pd_baseline: pd }, ...conds];
+  const failed = new Set(flightFailures(ev).map((f) => f.name));
   const what = (c) => Object.entries(c.changes || {}).map(([k, v]) => `${k} ${v}`).join(", ") || "the evaluation's slews";
   const cells = (s) => (s ? [fmt.pct(s.success_rate), fmt.int(s.safety_violations), fmt.num(2)(s.median_settling_time_s)]
     : ["-", "-", "-"]).map((t) => el("td", { class: "num", text: t }));
@@ -556,8 +557,24 @@ function conditionsTable(ev) {
     el("h3", { text: "Flight conditions (same slews, policy and PD)" }),
     el("table", { class: "eval conditions" },
       el("thead", {}, el("tr", {}, ...head.map((t, i) => el("th", { class: i > 1 ? "num" : "", text: t })))),
-      el("tbody", {}, ...rows.map((c) => el("tr", { "data-condition": c.name }, el("th", { text: c.name }),
+      el("tbody", {}, ...rows.map((c) => el("tr", { "data-condition": c.name,
+        class: failed.has(c.name) ? "failed" : "" }, el("th", { text: c.name }),
         el("td", { class: "hint", text: what(c) }), ...cells(c.policy), ...cells(c.pd_baseline))))));
+}
+
+// evaluation.json's flight_failures: the conditions where PD lands and the policy does not.
+function flightFailures(ev) {
+  return ev && Array.isArray(ev.flight_failures) ? ev.flight_failures : [];
+}
+
+// Next to the downloads: the policy they hold is not ready for the conditions it fails.
+function flightWarning(ev) {
+  const box = $("flight-warning");
+  const failed = flightFailures(ev);
+  box.hidden = !failed.length;
+  box.textContent = failed.length ? "Not flight-ready: this policy fails " + failed.map((f) =>
+    `${f.name} (${fmt.pct(f.policy_success)}; PD ${fmt.pct(f.pd_success)})`).join(", ")
+    + " of the same slews. Train with randomise (docs/robustness.md) before flying it." : "";
 }
 
 // verification.json (evaluation.basilisk): the same slews flown in modsat and in Basilisk.
@@ -632,10 +649,12 @@ async function renderFiles(job, files) {
   if (names.has("evaluation.json")) {
     const r = await api(`/api/jobs/${job.id}/artifacts/evaluation.json`);
     if (r.ok) state.reference = referenceFrom(r.body, job);
+    flightWarning(r.ok ? r.body : null);
     evBox.replaceChildren(...(r.ok ? [designLine(job.evaluation && job.evaluation.design), evalTable(r.body),
       conditionsTable(r.body)]
       : [el("p", { class: "errors", text: errorText(r) })]).filter(Boolean));
   } else {
+    flightWarning(null);
     evBox.replaceChildren(el("p", { class: "hint", text: TERMINAL.has(job.status)
       ? "no evaluation for this job" : "the Monte-Carlo evaluation comes when the run has finished" }));
   }
