@@ -164,7 +164,7 @@ class DesignReport(_DesignFigures):
     @model_validator(mode="after")
     def _figures_match_the_grid(self) -> DesignReport:
         g = as_grid(self.grid)
-        found = {"grid_size": g.shape[0], "modules": int((g != EMPTY).sum()), "actuators": int((g == ACTUATOR).sum())}
+        found = {"grid_size": g.shape[0], "modules": int((g != EMPTY).sum()), "actuators": int((g >= ACTUATOR).sum())}
         wrong = [f"{k} is {getattr(self, k)}, the grid has {v}" for k, v in found.items() if getattr(self, k) != v]
         if wrong:
             raise ValueError("; ".join(wrong))
@@ -179,7 +179,7 @@ class DesignReport(_DesignFigures):
             grid_size=int(g.shape[0]),
             valid=bool(is_valid(g)),
             modules=int((g != EMPTY).sum()),
-            actuators=int((g == ACTUATOR).sum()),
+            actuators=int((g >= ACTUATOR).sum()),
             types=dict(CELL_TYPES),
             **figures,
         )
@@ -241,6 +241,29 @@ class ConditionEvaluation(Record):
     pd_baseline: EvaluationSummary
 
 
+#: A flight condition is *failed* when PD lands at least this share of its slews and the policy lands
+#: less than this share of what PD lands (docs/robustness.md, "Failures are flagged").
+FAILURE_SHARE = 0.9
+
+
+class FlightFailure(Record):
+    """A flight condition the policy fails where PD lands (:data:`FAILURE_SHARE`)."""
+
+    name: str
+    policy_success: float
+    pd_success: float
+
+
+def flight_failures(conditions: list[ConditionEvaluation]) -> list[FlightFailure]:
+    """The conditions of ``conditions`` where PD lands and the policy does not (:data:`FAILURE_SHARE`)."""
+    out = []
+    for c in conditions:
+        pol, pd = c.policy.success_rate, c.pd_baseline.success_rate
+        if pd >= FAILURE_SHARE and pol < FAILURE_SHARE * pd:
+            out.append(FlightFailure(name=c.name, policy_success=pol, pd_success=pd))
+    return out
+
+
 class EvaluationReport(Record):
     """``evaluation.json``: the policy and the PD baseline on the same seeded slews, nominal and under
     each of ``evaluation.conditions``."""
@@ -253,6 +276,21 @@ class EvaluationReport(Record):
     pd_baseline: ControllerEvaluation | None = Field(description="null when the design is not a valid satellite.")
     conditions: list[ConditionEvaluation] = Field(
         default_factory=list, description="Empty for runs written before conditions were evaluated."
+    )
+    requirements: dict[str, Any] | None = Field(
+        None,
+        description=(
+            "With the spec's `requirements`: whether the design and its controller meet them (`meets`), every "
+            "requirement missed (`reasons`), the design's mass and power, and the share of slews that settle "
+            "within the time, nominally and under each condition (docs/requirements.md)."
+        ),
+    )
+    flight_failures: list[FlightFailure] = Field(
+        default_factory=list,
+        description=(
+            "The conditions where PD lands at least 90 % of the slews and the policy less than 90 % of what PD "
+            "lands: a controller not ready for flight under them (empty: none, or no conditions flown)."
+        ),
     )
 
 
@@ -326,6 +364,11 @@ class RunSummary(Record):
     conditions: list[ConditionEvaluation] = Field(
         default_factory=list, description="The policy and PD under each flight condition (docs/robustness.md)."
     )
+
+    @property
+    def flight_failures(self) -> list[FlightFailure]:
+        """The conditions the policy fails where PD lands (:func:`flight_failures`)."""
+        return flight_failures(self.conditions)
 
 
 def conditions_table(

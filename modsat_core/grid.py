@@ -16,8 +16,12 @@ from typing import Any
 
 import numpy as np
 
-#: Cell types of a design grid.
+#: Cell types of a design grid. A cell of ``ACTUATOR + k`` holds a wheel unit of the parts catalog's
+#: wheel type ``k`` (``modules.wheels``, docs/requirements.md); without a catalog there is one type, 2.
 EMPTY, STRUCTURE, ACTUATOR = 0, 1, 2
+#: The most wheel types a parts catalog may list: the largest cell value is ``ACTUATOR + MAX_WHEEL_TYPES - 1``.
+MAX_WHEEL_TYPES = 8
+MAX_CELL = ACTUATOR + MAX_WHEEL_TYPES - 1
 
 
 def flood_fill(reached: Any, filled: Any) -> Any:
@@ -50,7 +54,7 @@ def valid_mask(grids: Any) -> Any:
     modules, all face-connected, one of them an actuator. At most N^3 dilations, usually about N."""
     B = grids.shape[0]
     filled = grids > 0
-    has_act = (grids == ACTUATOR).reshape(B, -1).any(1)
+    has_act = (grids >= ACTUATOR).reshape(B, -1).any(1)
     return filled.reshape(B, -1).any(1) & _connected(filled) & has_act
 
 
@@ -64,8 +68,10 @@ def as_grid(design) -> np.ndarray:
     grid = np.asarray(design, dtype=np.int64)
     if grid.ndim != 3 or len(set(grid.shape)) != 1:
         raise ValueError(f"a design is an N x N x N grid; got shape {grid.shape}")
-    if grid.size and (grid.min() < 0 or grid.max() > 2):
-        raise ValueError("design cells must be 0 (empty), 1 (structure) or 2 (actuator)")
+    if grid.size and (grid.min() < 0 or grid.max() > MAX_CELL):
+        raise ValueError(
+            f"design cells must be 0 (empty), 1 (structure) or 2..{MAX_CELL} (a wheel unit of the catalog's type 0..)"
+        )
     return grid.astype(np.int8)
 
 
@@ -76,7 +82,7 @@ def is_connected(design) -> bool:
 
 
 def has_actuator(design) -> bool:
-    return bool((as_grid(design) == ACTUATOR).any())
+    return bool((as_grid(design) >= ACTUATOR).any())
 
 
 def validity_problem(design) -> str | None:
@@ -85,7 +91,7 @@ def validity_problem(design) -> str | None:
     if not (grid > 0).any():
         return "it has no modules"
     if not has_actuator(grid):
-        return "it has no actuator module (type 2)"
+        return "it has no actuator module (type 2 or above)"
     if not is_connected(grid):
         return "its modules are not face-connected"
     return None

@@ -192,4 +192,4 @@ class RunData:
 
     @property
     def actuators(self) -> int:
-        return int((self.grid == ACTUATOR).sum())
+        return int((self.grid >= ACTUATOR).sum())

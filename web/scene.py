@@ -160,7 +160,7 @@ def draw_satellite(
         colors = vox.colors_linear.astype(np.float32)
         # Actuators opaque, structure translucent: a wheel unit inside the satellite (the
         # designs that fly best put the one actuator at the centre) stays visible.
-        act = vox.types == ACTUATOR
+        act = vox.types >= ACTUATOR
         for name, sel, opacity in (("voxels", act, None), ("structure", ~act, STRUCTURE_OPACITY)):
             if sel.any():
                 scene.add_batched_meshes_simple(

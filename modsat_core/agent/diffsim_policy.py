@@ -153,6 +153,7 @@ class ExportedDiffsimController(nn.Module):
     if TYPE_CHECKING:  # the buffers' types, for mypy only
         I_B: Tensor
         design: Tensor
+        unit_tau: Tensor
         lam: Tensor
         c: Tensor
 
@@ -164,18 +165,23 @@ class ExportedDiffsimController(nn.Module):
         tau_max_Nm: float,
         I_B: Tensor,
         pd: PDGains | None = None,
+        unit_torque_Nm: np.ndarray | None = None,
     ):
         super().__init__()
         self.policy = policy
-        self.K = int((np.asarray(grid) == ACTUATOR).sum())
+        self.K = int((np.asarray(grid) >= ACTUATOR).sum())
         self.rate_limit = rate_limit_rad_s
         self.tau_max = tau_max_Nm
+        # each wheel unit's per-axis torque (a parts catalog's units differ); the box is their sum
+        unit = np.full(self.K, tau_max_Nm) if unit_torque_Nm is None else np.asarray(unit_torque_Nm, dtype=np.float64)
+        self.register_buffer("unit_tau", torch.as_tensor(unit, dtype=torch.float64).reshape(1, self.K, 1))
+        self.box = float(unit.sum())
         self.residual = pd is not None
         f64 = torch.float64
         I_B = I_B.detach().to(f64).reshape(1, 3, 3)
         self.register_buffer("I_B", I_B[0])
         # the design's inputs (none for a one-design controller), constant for the exported design
-        design = design_inputs(I_B, torch.full((1, 1), self.K * tau_max_Nm, dtype=f64))
+        design = design_inputs(I_B, torch.full((1, 1), self.box, dtype=f64))
         self.register_buffer("design", design[:, : policy.n_design].float())
         zero = torch.zeros(1, dtype=f64)
         self.register_buffer("lam", zero if pd is None else pd.lam_per_s.detach().to(f64).reshape(1))
@@ -186,7 +192,7 @@ class ExportedDiffsimController(nn.Module):
         # q and -q are one attitude: the PD law takes the representative the simulator passes
         # (w >= 0), so that it turns the short way whatever sign the caller gives.
         q_BT = q_BT * torch.where(q_BT[:, :1] < 0, -1.0, 1.0)
-        box = torch.full((q_BT.shape[0], 1), self.K * self.tau_max, dtype=q_BT.dtype)
+        box = torch.full((q_BT.shape[0], 1), self.box, dtype=q_BT.dtype)
         h_tot = h_B.sum(dim=1)
         x = diffsim_inputs(q_BT, omega_B, h_tot, self.rate_limit, box).float()
         x = torch.cat((x, self.design.expand(x.shape[0], -1)), dim=-1)
@@ -195,4 +201,4 @@ class ExportedDiffsimController(nn.Module):
             dt = q_BT.dtype
             tau = pd_torque(q_BT, omega_B, h_tot, self.I_B.to(dt), self.lam.to(dt), self.c.to(dt), self.omega_lim, box)
             f = (tau / box + f).clamp(-1.0, 1.0)
-        return f.unsqueeze(1).expand(-1, self.K, 3) * self.tau_max
+        return f.unsqueeze(1).expand(-1, self.K, 3) * self.unit_tau.to(q_BT.dtype)

@@ -63,7 +63,7 @@ def example_inputs(n_wheels: int, batch: int = 2) -> tuple[Tensor, Tensor, Tenso
 
 def export_program(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> torch.export.ExportedProgram:
     """:func:`exported` captured by ``torch.export`` for float32 inputs of any batch size."""
-    K = int((np.asarray(grid) == ACTUATOR).sum())
+    K = int((np.asarray(grid) >= ACTUATOR).sum())
     batch = torch.export.Dim.DYNAMIC
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)  # torch's own pytree deprecations

@@ -71,7 +71,7 @@ def flat_observation(obs: CellObs, act_cells: Tensor) -> Tensor:
 
 
 def _actuator_cells(grid: np.ndarray) -> Tensor:
-    cells = np.flatnonzero(np.asarray(grid).reshape(-1) == ACTUATOR)
+    cells = np.flatnonzero(np.asarray(grid).reshape(-1) >= ACTUATOR)
     if len(cells) == 0:
         raise ValueError("the flat controller needs a design with at least one actuator")
     return torch.as_tensor(cells)

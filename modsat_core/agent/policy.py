@@ -55,7 +55,7 @@ class PolicyController:
         self.design_steps, self.rate_limit_rad_s = design_space.design_steps, mission.rate_limit_rad_s
         self.grid = torch.as_tensor(np.asarray(grid), dtype=torch.long)
         self.N = self.grid.shape[0]
-        self.act_cells = torch.as_tensor(np.flatnonzero(np.asarray(grid).reshape(-1) == ACTUATOR))
+        self.act_cells = torch.as_tensor(np.flatnonzero(np.asarray(grid).reshape(-1) >= ACTUATOR))
 
     def observation(self, sim: SlewSim) -> CellObs:
         B, C = sim.B, self.N**3
@@ -138,10 +138,11 @@ def controller_for(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> Callabl
 def exported(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> nn.Module:
     """The standalone controller of ``actor`` flying ``grid``: ``forward(q_BT, omega_B, h_B)``."""
     if isinstance(actor, DiffsimPolicy):
-        sim = SlewSim.from_designs([Design.from_grid(grid, spec.modules)], spec.mission, spec.modules)
+        design = Design.from_grid(grid, spec.modules)
+        sim = SlewSim.from_designs([design], spec.mission, spec.modules)
         # the design's PD law, as training flew it
         pd = pd_gains(sim, rate_gain_max=actor.pd_rate_gain_max) if spec.diffsim.base == "pd" else None
-        return ExportedDiffsimController(
-            actor, grid, spec.mission.rate_limit_rad_s, spec.modules.torque_scale_Nm, sim.plant.I_B[0], pd
-        )
+        tau = spec.modules.torque_scale_Nm
+        unit = design.slot_weights()[0] * tau if spec.modules.wheels else None
+        return ExportedDiffsimController(actor, grid, spec.mission.rate_limit_rad_s, tau, sim.plant.I_B[0], pd, unit)
     return ExportedController(actor, grid, spec.design, spec.mission, spec.modules)

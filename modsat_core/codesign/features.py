@@ -194,7 +194,7 @@ def cell_observation(
     per_sat = torch.stack(
         (
             design.to(torch.float32),
-            (flat == ACTUATOR).sum(dim=1).to(torch.float32) / C,
+            (flat >= ACTUATOR).sum(dim=1).to(torch.float32) / C,
             count.to(torch.float32) / C,
             valid.to(torch.float32),
         ),
@@ -221,6 +221,6 @@ def cell_observation(
         cpart = torch.zeros(B, C, N_CONTROL, device=dev)
     x = torch.cat((common, dpart, cpart), dim=-1)
 
-    act_mask = torch.where(design.unsqueeze(-1), torch.ones_like(flat, dtype=torch.bool), flat == ACTUATOR)
+    act_mask = torch.where(design.unsqueeze(-1), torch.ones_like(flat, dtype=torch.bool), flat >= ACTUATOR)
     value_mask = torch.where(design.unsqueeze(-1), torch.ones_like(flat, dtype=torch.bool), flat != EMPTY)
     return CellObs(x=x, act_mask=act_mask, value_mask=value_mask, design=design)

@@ -6,6 +6,7 @@ a finished run writes (docs/learning.md, "Outputs of a run").
 from __future__ import annotations
 
 import io
+import math
 from typing import Any
 
 import numpy as np
@@ -14,14 +15,25 @@ import torch
 from modsat_core.agent.export import export_files
 from modsat_core.agent.policy import controller_for
 from modsat_core.agent.policy_file import policy_bytes
-from modsat_core.artefacts import CurveFile, CurvePoint, DesignReport, EvaluationReport, RunSummary, Trajectories
+from modsat_core.artefacts import (
+    ConditionEvaluation,
+    CurveFile,
+    CurvePoint,
+    DesignReport,
+    EvaluationReport,
+    RunSummary,
+    Trajectories,
+    flight_failures,
+)
 from modsat_core.codesign.mdp import effective_invalid_penalty
 from modsat_core.evaluation.monte_carlo import monte_carlo, monte_carlo_conditions
 from modsat_core.grid import ACTUATOR, EMPTY, is_valid
-from modsat_core.sim.morphology import mass_properties
+from modsat_core.sim.morphology import design_mass_properties
 from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design
 from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.parts import design_mass_kg, design_power_W
+from modsat_core.spec.requirements import landed_within, verdict
 
 #: Final-evaluation tolerances reported beside the mission's own.
 REPORT_TOLERANCES_DEG = (0.25, 1.0)
@@ -64,7 +76,7 @@ def curve_point(
 ) -> dict:
     mc = evaluate_design(actor, grid, spec, episodes=spec.training.eval_episodes, seed=curve_seed(spec))
     n_mod = int((np.asarray(grid) != EMPTY).sum())
-    n_act = int((np.asarray(grid) == ACTUATOR).sum())
+    n_act = int((np.asarray(grid) >= ACTUATOR).sum())
     point: dict[str, Any] = {
         "env_steps": env_steps,
         "updates": updates,
@@ -93,7 +105,7 @@ def design_report(grid: np.ndarray, spec: JobSpec) -> DesignReport:
     grid = np.asarray(grid)
     if not (grid != EMPTY).any():
         return DesignReport.of(grid)
-    mp = mass_properties(grid, spec.modules.module_mass_kg, spec.modules.module_size_m)
+    mp = design_mass_properties(grid, spec.modules)
     return DesignReport.of(
         grid,
         mass_kg=float(mp.mass_kg),
@@ -126,6 +138,18 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     out["pd_baseline"] = {"summary": pd.summary(tols), "episodes": pd.episodes}
     out["trajectories"] = {"policy": mc.trajectories, "pd_baseline": pd.trajectories}
     out["conditions"] = condition_table(actor, grid, design, spec, tols, n)
+    conds = [ConditionEvaluation.model_validate(c) for c in out["conditions"]]
+    out["flight_failures"] = [f.to_dict() for f in flight_failures(conds)]
+    if spec.requirements is not None:
+        limit = spec.requirements.settling_time_s
+        shares = {"nominal": landed_within(mc.episodes, limit)}
+        shares.update({c["name"]: c.pop("_within") for c in out["conditions"]})
+        out["requirements"] = verdict(
+            spec.requirements, design_mass_kg(grid, spec.modules), design_power_W(grid, spec.modules), shares
+        )
+    else:
+        for c in out["conditions"]:
+            c.pop("_within")
     return out
 
 
@@ -141,12 +165,14 @@ def condition_table(
     m, mods = spec.mission, spec.modules
     pol = monte_carlo_conditions(design, controller_for(actor, grid, spec), m, mods, conditions, **kw)
     pd = monte_carlo_conditions(design, PDController, m, mods, conditions, **kw)
+    limit = spec.requirements.settling_time_s if spec.requirements is not None else math.inf
     return [
         {
             "name": c.name,
             "changes": c.changes(),
             "policy": pol[c.name].summary(tols),
             "pd_baseline": pd[c.name].summary(tols),
+            "_within": landed_within(pol[c.name].episodes, limit),  # for the requirements' verdict
         }
         for c in conditions
     ]

@@ -294,8 +294,8 @@ def design_png(design: DesignReport, title: str) -> bytes:
 
     g = design.array
     colors = np.empty(g.shape, dtype=object)
-    colors[g == ACTUATOR] = "#f28e2b"
-    colors[(g != EMPTY) & (g != ACTUATOR)] = "#bab0ac"
+    colors[g >= ACTUATOR] = "#f28e2b"
+    colors[(g != EMPTY) & (g < ACTUATOR)] = "#bab0ac"
     fig = plt.figure(figsize=(3.6, 3.6), dpi=100)
     ax = fig.add_subplot(projection="3d")
     ax.voxels(g != EMPTY, facecolors=colors, edgecolor="k", linewidth=0.4)

@@ -63,6 +63,8 @@ class Plant:
         n_rad_s: orbit mean motion; 0 disables the gravity-gradient torque.
         orbit_phase_rad: (B,) argument of latitude at t = 0.
         tau_residual_B: (B, 3) constant disturbance torque, N m.
+        momentum_weight: (B, K) each slot's momentum capacity as a fraction of ``h_max`` (a parts
+            catalog's wheel units differ in torque and in momentum; None: the slot's ``actuator_mask``).
     """
 
     I_B: Tensor
@@ -74,6 +76,7 @@ class Plant:
     n_rad_s: float
     orbit_phase_rad: Tensor
     tau_residual_B: Tensor
+    momentum_weight: Tensor | None = None
 
     @property
     def batch_size(self) -> int:
@@ -103,6 +106,7 @@ class Plant:
             actuator_mask=self.actuator_mask[idx],
             orbit_phase_rad=self.orbit_phase_rad[idx],
             tau_residual_B=self.tau_residual_B[idx],
+            momentum_weight=None if self.momentum_weight is None else self.momentum_weight[idx],
         )
 
 
@@ -153,8 +157,13 @@ def wheel_torque(h_B: Tensor, tau_cmd_B: Tensor, plant: Plant, dt_s: float) -> T
     mask = plant.actuator_mask.unsqueeze(-1)
     u = -tau_cmd_B.clamp(-plant.tau_max_Nm, plant.tau_max_Nm) * mask
     if plant.wheels and math.isfinite(plant.h_max_Nms):
-        # a weighted slot (a relaxed grid's) is that fraction of a unit: of its capacity too
-        h_max = plant.h_max_Nms * mask if mask.is_floating_point() else plant.h_max_Nms
+        # a weighted slot (a relaxed grid's) is that fraction of a unit: of its capacity too; a catalog's
+        # wheel unit has its own capacity (momentum_weight)
+        h_max: Tensor | float
+        if plant.momentum_weight is not None:
+            h_max = plant.h_max_Nms * plant.momentum_weight.unsqueeze(-1)
+        else:
+            h_max = plant.h_max_Nms * mask if mask.is_floating_point() else plant.h_max_Nms
         u = torch.minimum(torch.maximum(u, (-h_max - h_B) / dt_s), (h_max - h_B) / dt_s)
     return u
 

@@ -26,6 +26,8 @@ import torch
 from torch import Tensor
 
 from modsat_core.grid import ACTUATOR, as_grid, flood_fill
+from modsat_core.spec.parts import cell_masses
+from modsat_core.spec.sections import ModuleCatalog
 
 
 @dataclass(frozen=True)
@@ -41,7 +43,7 @@ class MassProperties:
 
     @property
     def actuator_positions_B_m(self) -> np.ndarray:
-        return self.positions_B_m[self.types == ACTUATOR]
+        return self.positions_B_m[self.types >= ACTUATOR]
 
     def to_dict(self) -> dict:
         return {
@@ -50,31 +52,49 @@ class MassProperties:
             "inertia_B_kgm2": self.inertia_B_kgm2.tolist(),
             "principal_moments_kgm2": np.linalg.eigvalsh(self.inertia_B_kgm2).tolist(),
             "modules": len(self.types),
-            "actuators": int((self.types == ACTUATOR).sum()),
+            "actuators": int((self.types >= ACTUATOR).sum()),
         }
 
 
-def mass_properties(design, module_mass_kg: float = 1.0, module_size_m: float = 0.1) -> MassProperties:
-    """Mass, centre of mass and full inertia tensor (products of inertia included)."""
+def mass_properties(design, module_mass_kg: float | np.ndarray = 1.0, module_size_m: float = 0.1) -> MassProperties:
+    """Mass, centre of mass and full inertia tensor (products of inertia included). ``module_mass_kg``:
+    every module's mass, or an (N, N, N) array of each cell's (:func:`~modsat_core.spec.parts.cell_masses`)."""
     grid = as_grid(design)
     cells = np.argwhere(grid > 0)
     if len(cells) == 0:
         raise ValueError("an empty design has no mass properties")
     types = grid[tuple(cells.T)].astype(np.int64)
-    m, a = float(module_mass_kg), float(module_size_m)
+    a = float(module_size_m)
     p_grid = cells.astype(np.float64) * a
-    com = p_grid.mean(axis=0)
-    r = p_grid - com
-    own = m * a * a / 6.0  # a solid cube about any axis through its centre
-    inertia = len(cells) * own * np.eye(3) + m * ((r * r).sum() * np.eye(3) - r.T @ r)
+    if np.ndim(module_mass_kg) == 0:
+        m = float(module_mass_kg)
+        com = p_grid.mean(axis=0)
+        r = p_grid - com
+        own = m * a * a / 6.0  # a solid cube about any axis through its centre
+        inertia = len(cells) * own * np.eye(3) + m * ((r * r).sum() * np.eye(3) - r.T @ r)
+        total = m * len(cells)
+    else:
+        w = np.asarray(module_mass_kg, dtype=np.float64)[tuple(cells.T)]  # (M,)
+        total = float(w.sum())
+        com = (w[:, None] * p_grid).sum(axis=0) / total
+        r = p_grid - com
+        inertia = (w.sum() * a * a / 6.0 + (w * (r * r).sum(1)).sum()) * np.eye(3) - (w[:, None] * r).T @ r
     return MassProperties(
-        mass_kg=m * len(cells),
+        mass_kg=total,
         com_grid_m=com,
         inertia_B_kgm2=inertia,
         positions_B_m=r,
         cells=cells,
         types=types,
     )
+
+
+def design_mass_properties(design, modules: ModuleCatalog) -> MassProperties:
+    """:func:`mass_properties` with the parts catalog's masses (structure, each wheel unit type, the
+    payload); without a catalog, every module ``module_mass_kg`` (the same numbers as before it)."""
+    if modules.wheels or modules.payload is not None:
+        return mass_properties(design, cell_masses(design, modules), modules.module_size_m)
+    return mass_properties(design, modules.module_mass_kg, modules.module_size_m)
 
 
 # ----------------------------------------------------------------------------- batched

@@ -28,8 +28,9 @@ from modsat_core.sim.mission import (
     reward,
     slew_axis_properties,
 )
-from modsat_core.sim.morphology import mass_properties
+from modsat_core.sim.morphology import design_mass_properties
 from modsat_core.spec.jobspec import Mission, ModuleCatalog
+from modsat_core.spec.parts import unit_limits
 
 
 def _put(x: Tensor, idx: Tensor, value: Tensor | float | int) -> Tensor:
@@ -77,19 +78,55 @@ class Design:
     grid: np.ndarray  # (N, N, N) int8
     I_B: np.ndarray  # (3, 3)
     actuator_positions_B_m: np.ndarray  # (K, 3)
+    #: (K,) each wheel unit's torque and momentum capacity as fractions of the catalog's strongest
+    #: (``torque_scale_Nm``, ``momentum_capacity_Nms``); None: every unit is a whole one of those.
+    torque_weight: np.ndarray | None = None
+    momentum_weight: np.ndarray | None = None
 
     @property
     def n_actuators(self) -> int:
         return len(self.actuator_positions_B_m)
 
+    def slot_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) torque and momentum fractions of its wheel units (ones without a catalog)."""
+        ones = np.ones(self.n_actuators)
+        return (
+            ones if self.torque_weight is None else self.torque_weight,
+            ones if self.momentum_weight is None else self.momentum_weight,
+        )
+
     @classmethod
     def from_grid(cls, grid, modules: ModuleCatalog) -> Design:
-        mp = mass_properties(grid, modules.module_mass_kg, modules.module_size_m)
+        mp = design_mass_properties(grid, modules)
+        units = mp.types >= ACTUATOR
+        tw = mw = None
+        if modules.wheels:
+            torque, momentum = unit_limits(mp.types[units], modules)
+            tw = torque / modules.torque_scale_Nm
+            mw = momentum / (modules.momentum_capacity_Nms or 1.0)
         return cls(
             grid=np.asarray(grid, dtype=np.int8),
             I_B=mp.inertia_B_kgm2,
-            actuator_positions_B_m=mp.positions_B_m[mp.types == ACTUATOR],
+            actuator_positions_B_m=mp.positions_B_m[units],
+            torque_weight=tw,
+            momentum_weight=mw,
         )
+
+
+def slot_masks(designs: list[Design], weighted: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """The (B, K) wheel-unit slots of ``designs``, packed: bool, or with ``weighted`` (a parts catalog)
+    each unit's torque fraction, float, and its momentum fraction beside it (else None)."""
+    K = max(d.n_actuators for d in designs)
+    if not weighted:
+        mask = np.zeros((len(designs), K), dtype=bool)
+        for i, d in enumerate(designs):
+            mask[i, : d.n_actuators] = True
+        return mask, None
+    torque, momentum = np.zeros((len(designs), K)), np.zeros((len(designs), K))
+    for i, d in enumerate(designs):
+        tw, mw = d.slot_weights()
+        torque[i, : d.n_actuators], momentum[i, : d.n_actuators] = tw, mw
+    return torque, momentum
 
 
 def episode_metrics(
@@ -138,6 +175,7 @@ class SlewSim:
         *,
         dtype: torch.dtype = torch.float32,
         device: str | torch.device = "cpu",
+        momentum_weight: np.ndarray | Tensor | None = None,
     ):
         """B satellites given by their inertia (B, 3, 3) and wheel-unit slots (B, K) bool.
 
@@ -164,6 +202,7 @@ class SlewSim:
             n_rad_s=dyn.mean_motion_rad_s(mission.orbit_altitude_km) if mission.gravity_gradient else 0.0,
             orbit_phase_rad=torch.zeros(self.B, **kw),
             tau_residual_B=torch.zeros(self.B, 3, **kw),
+            momentum_weight=None if momentum_weight is None else torch.as_tensor(momentum_weight, **kw).clone(),
         )
         self.state = dyn.State(
             q_BN=torch.tensor([[1.0, 0.0, 0.0, 0.0]], **kw).repeat(self.B, 1),
@@ -181,24 +220,29 @@ class SlewSim:
 
     @classmethod
     def from_designs(cls, designs: list[Design], mission: Mission, modules: ModuleCatalog, **kw) -> SlewSim:
-        """One satellite per design, wheel-unit slots packed (K = the most actuators)."""
-        K = max(d.n_actuators for d in designs)
-        mask = np.zeros((len(designs), K), dtype=bool)
-        for i, d in enumerate(designs):
-            mask[i, : d.n_actuators] = True
-        return cls(np.stack([d.I_B for d in designs]), mask, mission, modules, **kw)
+        """One satellite per design, wheel-unit slots packed (K = the most actuators). With a parts
+        catalog the slots are weighted by each unit's torque and momentum (:meth:`Design.slot_weights`)."""
+        mask, momentum = slot_masks(designs, bool(modules.wheels))
+        return cls(np.stack([d.I_B for d in designs]), mask, mission, modules, momentum_weight=momentum, **kw)
 
-    def set_plants(self, idx: Tensor, I_B: Tensor, actuator_mask: Tensor) -> None:
-        """Replace the satellites ``idx`` (the learning code swaps designs between episodes).
+    def set_plants(
+        self, idx: Tensor, I_B: Tensor, actuator_mask: Tensor, momentum_weight: Tensor | None = None
+    ) -> None:
+        """Replace the satellites ``idx`` (the learning code swaps designs between episodes); with a
+        parts catalog, ``momentum_weight`` too (else the slots keep theirs).
 
         Out of place, as :meth:`reset`: tensors a backward pass may still need are never written."""
         I_B = I_B.to(self.dtype)
         p = self.plant
+        mw = p.momentum_weight
+        if mw is not None and momentum_weight is not None:
+            mw = _put(mw, idx, momentum_weight.to(mw))
         self.plant = replace(
             p,
             I_B=_put(p.I_B, idx, I_B),
             I_B_inv=_put(p.I_B_inv, idx, torch.linalg.inv(I_B)),
-            actuator_mask=_put(p.actuator_mask, idx, actuator_mask),
+            actuator_mask=_put(p.actuator_mask, idx, actuator_mask.to(p.actuator_mask.dtype)),
+            momentum_weight=mw,
         )
 
     # ------------------------------------------------------------------ reset / observe

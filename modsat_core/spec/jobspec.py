@@ -20,6 +20,8 @@ from modsat_core.grid import is_connected
 from modsat_core.spec.diffsim import Diffsim
 from modsat_core.spec.evaluation import Evaluation, Randomise
 from modsat_core.spec.objective import Objective
+from modsat_core.spec.parts import WHEELS_PER_UNIT, unit_mass_kg
+from modsat_core.spec.requirements import Requirements
 from modsat_core.spec.sections import GA, DesignSpace, Mission, ModuleCatalog, RewardSpec, _Section
 from modsat_core.spec.training import Training
 
@@ -67,9 +69,17 @@ class JobSpec(_Section):
     diffsim: Diffsim = Field(default_factory=Diffsim)
     objective: Objective = Field(default_factory=Objective)
     randomise: Randomise = Field(default_factory=Randomise)
+    requirements: Requirements | None = Field(
+        None,
+        description=(
+            "What the satellite must do and may weigh (docs/requirements.md); the final evaluation says whether "
+            "the run's design and controller meet it. null: no requirements."
+        ),
+    )
 
     @model_validator(mode="after")
     def _check_consistency(self) -> JobSpec:
+        self._check_catalog()
         N, payload = self.design.grid_size, self.objective.payload_cells
         outside = next((c for c in payload if max(c) >= N), None)
         if outside is not None:
@@ -81,6 +91,75 @@ class JobSpec(_Section):
         if self.modules.momentum_capacity_Nms is not None and self.modules.actuator_model != "reaction-wheel":
             raise ValueError("modules.momentum_capacity_Nms is only meaningful with actuator_model 'reaction-wheel'")
         return self
+
+    def _check_catalog(self) -> None:
+        """The parts catalog against the grid, the algorithm and the requirements."""
+        m, N = self.modules, self.design.grid_size
+        types = len(m.wheels) if m.wheels else 1
+        fixed = self.design.fixed_design
+        if fixed is not None:
+            top = max(c for plane in fixed for row in plane for c in row)
+            if top >= 2 + types:
+                raise ValueError(
+                    f"design.fixed_design has a cell of type {top}, a wheel unit of type {top - 2}; "
+                    f"modules.wheels lists {types} type{'s' * (types != 1)} (cells 2..{1 + types})"
+                )
+        if m.payload is not None:
+            outside = next((c for c in m.payload.cells if max(c) >= N), None)
+            if outside is not None:
+                raise ValueError(f"modules.payload.cells: {list(outside)} is outside the {N}^3 grid")
+            if not is_connected(_payload_grid([(c[0], c[1], c[2]) for c in m.payload.cells], N)):
+                raise ValueError("modules.payload.cells must be face-connected: the payload is one piece")
+            obj = self.objective.payload_cells
+            if obj and sorted(obj) != sorted((c[0], c[1], c[2]) for c in m.payload.cells):
+                raise ValueError("objective.payload_cells and modules.payload.cells name different cells; give one")
+        if (m.wheels or m.payload is not None) and self.algorithm not in ("diffsim-control", "diffsim-codesign"):
+            raise ValueError(
+                f"modules.wheels and modules.payload (the parts catalog) fly with the first-order learner "
+                f"(`diffsim-control`, `diffsim-codesign`), not {self.algorithm!r}"
+            )
+        if m.wheels and self.algorithm == "diffsim-codesign" and self.diffsim.design_gradient == "relaxed":
+            raise ValueError("diffsim.design_gradient `relaxed` relaxes one wheel unit type: leave modules.wheels out")
+        r = self.requirements
+        if r is not None:
+            for key, got in (("slew_max_deg", self.mission.slew_max_deg), ("slew_min_deg", self.mission.slew_min_deg)):
+                want = getattr(r, key)
+                if want is not None and (got < want if key == "slew_max_deg" else got > want):
+                    raise ValueError(
+                        f"requirements.{key} ({want:g}) is outside the slews the mission flies "
+                        f"(mission.{key} {got:g}): the run could not show it"
+                    )
+            if r.tolerance_deg is not None and self.mission.tolerance_deg > r.tolerance_deg:
+                raise ValueError(
+                    f"requirements.tolerance_deg ({r.tolerance_deg:g}) is tighter than mission.tolerance_deg "
+                    f"({self.mission.tolerance_deg:g}), the tolerance the run is judged at; make them equal"
+                )
+            self._check_reachable(r)
+            if r.power_budget_W is not None and not (m.wheels and all(w.power_W is not None for w in m.wheels)):
+                raise ValueError(
+                    "requirements.power_budget_W needs modules.wheels with every wheel's power_W "
+                    "(the library's wheels carry none: give each its datasheet's steady power)"
+                )
+
+    def _check_reachable(self, r: Requirements) -> None:
+        """A budget below the lightest satellite the grid can hold (the payload and one wheel unit of the
+        lightest, least power-hungry type) is refused: no design could meet it."""
+        m = self.modules
+        payload = m.payload.mass_kg * len(m.payload.cells) if m.payload is not None else 0.0
+        payload += m.module_mass_kg * len(self.objective.payload_cells)
+        unit = min(unit_mass_kg(m, k) for k in range(len(m.wheels) if m.wheels else 1))
+        if r.mass_budget_kg is not None and r.mass_budget_kg < payload + unit:
+            raise ValueError(
+                f"requirements.mass_budget_kg ({r.mass_budget_kg:g} kg) is below the lightest satellite the grid "
+                f"can hold ({payload + unit:.3g} kg: the payload and one wheel unit): no design can meet it"
+            )
+        if r.power_budget_W is not None and m.wheels and all(w.power_W is not None for w in m.wheels):
+            least = min(WHEELS_PER_UNIT * (w.power_W or 0.0) for w in m.wheels)
+            if r.power_budget_W < least:
+                raise ValueError(
+                    f"requirements.power_budget_W ({r.power_budget_W:g} W) is below one wheel unit's steady power "
+                    f"({least:.3g} W): no design can meet it"
+                )
 
 
 def _payload_grid(cells: list[tuple[int, int, int]], N: int) -> list:

@@ -29,6 +29,15 @@ class Objective(_Section):
     wheel_price_s: float = Field(
         0.0, ge=0.0, le=1000.0, description="Seconds more for a module that is a wheel unit (its cost, power, mass)."
     )
+    mass_price_s_per_kg: float = Field(
+        0.0,
+        ge=0.0,
+        le=1000.0,
+        description=(
+            "Seconds of slew time a kilogram is worth not carrying: the design's mass from the parts catalog "
+            "(`modules`: structure, each wheel unit type, the payload), added to the module and wheel prices."
+        ),
+    )
     payload_cells: list[tuple[_Index, _Index, _Index]] = Field(
         default_factory=list,
         max_length=1000,

@@ -10,7 +10,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from modsat_core.grid import validity_problem
+from modsat_core.grid import MAX_CELL, MAX_WHEEL_TYPES, validity_problem
+from modsat_core.spec.parts import WHEEL_LIBRARY, Payload, WheelType, resolve_wheels
 
 # Numbers that appear in several places of the spec.
 PAPER_TAU_3X3X3_NM = 0.8
@@ -29,7 +30,7 @@ Vec3 = tuple[
 
 
 # Nested lists of cell types, at most 10 deep on each axis (the largest grid).
-_Cell = Annotated[int, Field(ge=0, le=2)]
+_Cell = Annotated[int, Field(ge=0, le=MAX_CELL)]
 DesignGrid = Annotated[
     list[Annotated[list[Annotated[list[_Cell], Field(max_length=10)]], Field(max_length=10)]],
     Field(max_length=10),
@@ -46,7 +47,8 @@ class DesignSpace(_Section):
     fixed_design: DesignGrid | None = Field(
         None,
         description=(
-            "A given morphology (N x N x N nested lists of 0 empty, 1 structure, 2 actuator). "
+            "A given morphology (N x N x N nested lists of 0 empty, 1 structure, 2 actuator; with "
+            "`modules.wheels`, 2 + k is a wheel unit of the catalog's k-th wheel). "
             "Required by `td3-control`, which trains a controller for this design only."
         ),
     )
@@ -112,6 +114,60 @@ class ModuleCatalog(_Section):
             "accelerate further in that direction. null = unlimited. Only for `reaction-wheel`."
         ),
     )
+    wheels: list[WheelType] | None = Field(
+        None,
+        max_length=MAX_WHEEL_TYPES,
+        description=(
+            "The parts catalog's wheel types (docs/requirements.md): objects, or the names of library wheels ("
+            + ", ".join(f"`{n}`" for n in WHEEL_LIBRARY)
+            + "). A wheel unit holds three wheels of one type; a design cell of 2 + k is a unit of the k-th. "
+            "With a catalog, `torque_scale_Nm` and `momentum_capacity_Nms` are the strongest wheel's (set for "
+            "you). null: one wheel unit type, `torque_scale_Nm` and `momentum_capacity_Nms`, weighing "
+            "`module_mass_kg`."
+        ),
+    )
+    payload: Payload | None = Field(
+        None,
+        description=(
+            "Fixed payload cells, each of its own mass, present in every design (co-design keeps them; null: none)."
+        ),
+    )
+
+    @field_validator("wheels", mode="before")
+    @classmethod
+    def _library(cls, v: Any) -> Any:
+        return resolve_wheels(v) if isinstance(v, list) else v
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_catalog(cls, data: Any) -> Any:
+        """With wheels, the per-unit torque and momentum scales are the strongest wheel's."""
+        if not isinstance(data, dict) or not isinstance(data.get("wheels"), list) or not data["wheels"]:
+            return data
+        try:
+            wheels = [
+                w if isinstance(w, WheelType) else WheelType.model_validate(w) for w in resolve_wheels(data["wheels"])
+            ]
+        except (ValueError, TypeError):
+            return data  # the field's own validation reports it
+        tau = max(w.torque_Nm for w in wheels)
+        cap = max(w.momentum_Nms for w in wheels)
+        for key, value in (("torque_scale_Nm", tau), ("momentum_capacity_Nms", cap)):
+            given = data.get(key)
+            if given is not None and not math.isclose(float(given), value, rel_tol=1e-9):
+                raise ValueError(
+                    f"{key} is the strongest catalog wheel's ({value:g}) when `wheels` is given; "
+                    f"leave it out (got {given})"
+                )
+        return {**data, "torque_scale_Nm": tau, "momentum_capacity_Nms": cap}
+
+    @model_validator(mode="after")
+    def _catalog_needs_wheels(self) -> ModuleCatalog:
+        if self.wheels is not None and not self.wheels:
+            raise ValueError("wheels: give at least one wheel type, or null for the single unit type")
+        if self.wheels and self.actuator_model != "reaction-wheel":
+            raise ValueError("a wheel catalog (`wheels`) needs actuator_model `reaction-wheel`")
+        return self
 
 
 class RewardSpec(_Section):

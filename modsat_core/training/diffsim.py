@@ -49,7 +49,7 @@ from modsat_core.evaluation.selection import keep, validate
 from modsat_core.grid import random_valid_design
 from modsat_core.sim.conditions import Flight
 from modsat_core.sim.mission import draw_episode
-from modsat_core.sim.slew import Design, SlewSim
+from modsat_core.sim.slew import Design, SlewSim, slot_masks
 from modsat_core.spec.diffsim import Diffsim
 from modsat_core.spec.jobspec import JobSpec, Mission
 from modsat_core.training.checkpoint import CheckpointFn, ProgressFn, StopFn, to_cpu
@@ -130,7 +130,9 @@ class DiffsimRun:
         windows = max(1, math.ceil(T / W))
         self.ep_steps = torch.as_tensor(self.rng.integers(0, windows, size=B) * W, dtype=torch.long)
         # Domain randomisation (the `randomise` section): the flight between controller and sim.
-        self.flight = Flight(self.sim, max_delay=spec.randomise.delay_steps, seed=spec.seed)
+        self.flight = Flight(
+            self.sim, max_delay=spec.randomise.delay_steps if spec.randomise.active else 0, seed=spec.seed
+        )
         self.start_slews(torch.arange(B))
         self.env_steps = 0
         self.updates = 0
@@ -205,12 +207,18 @@ class DiffsimRun:
         """Put rows ``idx`` on their designs of the pool (``row_design``)."""
         designs = [self.pool[i] for i in self.row_design[idx].tolist()]
         K = self.sim.plant.actuator_mask.shape[1]
-        mask = torch.zeros(len(designs), K, dtype=torch.bool)
-        for r, d in enumerate(designs):
-            mask[r, : d.n_actuators] = True
+        packed, momentum = slot_masks(designs, bool(self.spec.modules.wheels))
+        mask = np.zeros((len(designs), K), dtype=packed.dtype)
+        mask[:, : packed.shape[1]] = packed
+        mw = None
+        if momentum is not None:
+            mw = np.zeros((len(designs), K))
+            mw[:, : momentum.shape[1]] = momentum
         I_B = torch.as_tensor(np.stack([d.I_B for d in designs]))
         dev = self.sim.device
-        self.sim.set_plants(idx.to(dev), I_B.to(dev), mask.to(dev))
+        self.sim.set_plants(
+            idx.to(dev), I_B.to(dev), torch.as_tensor(mask).to(dev), None if mw is None else torch.as_tensor(mw).to(dev)
+        )
 
     # ------------------------------------------------------------------ the run
     def run(self, on_progress: ProgressFn, on_checkpoint: CheckpointFn, should_stop: StopFn) -> bool:

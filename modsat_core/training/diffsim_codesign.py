@@ -47,8 +47,9 @@ from modsat_core.grid import ACTUATOR, EMPTY, STRUCTURE, flood_fill
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.morphology import mass_properties_of_occupancy
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.spec.jobspec import DesignSpace, JobSpec
+from modsat_core.spec.jobspec import DesignSpace, JobSpec, ModuleCatalog
 from modsat_core.spec.objective import Objective
+from modsat_core.spec.parts import design_mass_kg
 from modsat_core.training.diffsim import DiffsimRun, _smooth_norm, training_mission
 
 #: Candidates for the kept design besides the distribution's mode: the run's best draws.
@@ -58,22 +59,36 @@ TOP_DRAWS = 3
 RELAXED_SOFTNESS = 0.5
 
 
-def objective_s(episodes: list[dict], grid: np.ndarray, objective: Objective, episode_s: float) -> float:
+def objective_s(
+    episodes: list[dict],
+    grid: np.ndarray,
+    objective: Objective,
+    episode_s: float,
+    catalog: ModuleCatalog | None = None,
+) -> float:
     """A design's objective (seconds, lower is better; the module docstring of
-    :mod:`modsat_core.spec.objective`) from its flown ``episodes`` (monte_carlo rows)."""
+    :mod:`modsat_core.spec.objective`) from its flown ``episodes`` (monte_carlo rows); the mass price
+    weighs the design with ``catalog`` (the spec's ``modules``)."""
     times = [e["settling_time_s"] if e["success"] else episode_s for e in episodes]
     g = np.asarray(grid)
-    modules, wheels = int((g != EMPTY).sum()), int((g == ACTUATOR).sum())
-    return float(np.mean(times)) + objective.module_price_s * modules + objective.wheel_price_s * wheels
+    modules, wheels = int((g != EMPTY).sum()), int((g >= ACTUATOR).sum())
+    out = float(np.mean(times)) + objective.module_price_s * modules + objective.wheel_price_s * wheels
+    if objective.mass_price_s_per_kg and catalog is not None:
+        out += objective.mass_price_s_per_kg * design_mass_kg(g, catalog)
+    return out
 
 
-def fixed_cells(design_space: DesignSpace, objective: Objective) -> tuple[np.ndarray, np.ndarray]:
-    """The cells the design learner never changes, (N, N, N) bool, and their types (int64): the
-    objective's payload cells as structure, else the grid's centre as an actuator."""
+def fixed_cells(
+    design_space: DesignSpace, objective: Objective, catalog: ModuleCatalog | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cells the design learner never changes, (N, N, N) bool, and their types (int64): the payload's
+    cells (the objective's, or the parts catalog's ``catalog.payload``) as structure, else the grid's
+    centre as an actuator."""
     N = design_space.grid_size
     mask = np.zeros((N, N, N), dtype=bool)
     types = np.zeros((N, N, N), dtype=np.int64)
-    payload = objective.payload_cells
+    own = catalog.payload.cells if catalog is not None and catalog.payload is not None else []
+    payload = list(objective.payload_cells) or [(c[0], c[1], c[2]) for c in own]
     if payload:
         for c in payload:
             mask[c], types[c] = True, STRUCTURE
@@ -107,7 +122,7 @@ def score_designs(
     mission = spec.mission if exact else training_mission(spec.mission, spec.diffsim.substeps)
     episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
     worst = episode_s + spec.design.grid_size**3 * (obj.module_price_s + obj.wheel_price_s)
-    valid = [i for i, g in enumerate(grids) if (g == ACTUATOR).any()]
+    valid = [i for i, g in enumerate(grids) if (g >= ACTUATOR).any()]
     out = [worst] * len(grids)
     if not valid:
         return out
@@ -120,7 +135,7 @@ def score_designs(
             designs, controller, mission, spec.modules, episodes=len(designs), seed=seed, dtype=dtype, slews=slews
         )
     for j, i in enumerate(valid):
-        out[i] = objective_s(mc.episodes[j * slews : (j + 1) * slews], grids[i], obj, episode_s)
+        out[i] = objective_s(mc.episodes[j * slews : (j + 1) * slews], grids[i], obj, episode_s, spec.modules)
     return out
 
 
@@ -129,8 +144,10 @@ class DiffsimCodesignRun(DiffsimRun):
 
     def __init__(self, spec: JobSpec, device: str = "cpu"):
         N = spec.design.grid_size
-        self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective)
-        self.logits = torch.zeros(N**3, 3, dtype=torch.float64, requires_grad=True)
+        self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective, spec.modules)
+        # a cell's types: empty, structure, and each wheel unit type of the parts catalog
+        types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
+        self.logits = torch.zeros(N**3, types, dtype=torch.float64, requires_grad=True)
         self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
         self.design_rng = np.random.default_rng([spec.seed, 5])
         self.records: list[dict] = []  # one per design update
@@ -146,7 +163,7 @@ class DiffsimCodesignRun(DiffsimRun):
         every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
         every[self.fixed] = self.fixed_types[self.fixed]
         grids, _ = self.draw(self.d.design_batch)
-        flyable = [g for g in [self.mode(), *grids] if (g == ACTUATOR).any()]  # a wheel unit: valid
+        flyable = [g for g in [self.mode(), *grids] if (g >= ACTUATOR).any()]  # a wheel unit: valid
         return (flyable or [every])[0], [every, *flyable]
 
     def probabilities(self) -> np.ndarray:
@@ -157,7 +174,7 @@ class DiffsimCodesignRun(DiffsimRun):
         N = self.spec.design.grid_size
         p = self.probabilities()
         u = self.design_rng.random((M, N**3, 1))
-        raw = (u > np.cumsum(p, axis=-1)[None, :, :2]).sum(-1).reshape(M, N, N, N)
+        raw = (u > np.cumsum(p, axis=-1)[None, :, :-1]).sum(-1).reshape(M, N, N, N)
         raw = np.where(self.fixed, self.fixed_types, raw)
         return satellites(raw, self.fixed, self.fixed_types), raw
 
@@ -197,7 +214,7 @@ class DiffsimCodesignRun(DiffsimRun):
         fixed = torch.as_tensor(self.fixed.reshape(-1))
         ftypes = torch.as_tensor(self.fixed_types.reshape(-1))
         occ = torch.where(fixed, (ftypes != EMPTY).double(), p[:, STRUCTURE] + p[:, ACTUATOR])
-        wheel = torch.where(fixed, (ftypes == ACTUATOR).double(), p[:, ACTUATOR])
+        wheel = torch.where(fixed, (ftypes >= ACTUATOR).double(), p[:, ACTUATOR])
         _, _, I_B = mass_properties_of_occupancy(occ.unsqueeze(0), m.module_mass_kg, m.module_size_m)
         S = self.d.design_slews
         sim = SlewSim(
@@ -242,15 +259,15 @@ class DiffsimCodesignRun(DiffsimRun):
         loss.backward()
         self.design_opt.step()
         for g, j in sorted(zip(list(grids), J.tolist(), strict=True), key=lambda x: x[1])[:TOP_DRAWS]:
-            if (g == ACTUATOR).any() and not any(np.array_equal(g, b["grid"]) for b in self.best):
+            if (g >= ACTUATOR).any() and not any(np.array_equal(g, b["grid"]) for b in self.best):
                 self.best.append({"grid": g, "objective_s": j})
         self.best = sorted(self.best, key=lambda b: b["objective_s"])[:TOP_DRAWS]
         mode = self.mode()
-        if (mode == ACTUATOR).any():
+        if (mode >= ACTUATOR).any():
             self.grid = mode
         else:  # the mode has no wheel yet: the curve flies the run's best draw
             self.grid = self.best[0]["grid"]
-        fresh = [g for g in [self.grid, *grids] if (g == ACTUATOR).any()]
+        fresh = [g for g in [self.grid, *grids] if (g >= ACTUATOR).any()]
         start = len(self.pool)
         self.pool += [Design.from_grid(g, self.spec.modules) for g in fresh]
         self.active = (start, len(self.pool))
@@ -261,12 +278,12 @@ class DiffsimCodesignRun(DiffsimRun):
                 "env_steps": self.env_steps,
                 "mean_objective_s": float(J.mean()),
                 "best_objective_s": float(J.min()),
-                "valid_draws": int(sum((g == ACTUATOR).any() for g in grids)),
+                "valid_draws": int(sum((g >= ACTUATOR).any() for g in grids)),
                 **({} if relaxed is None else {"relaxed_objective_s": relaxed}),
                 "entropy_nats": float(-(p * np.log(p + 1e-12)).sum(-1)[~self.fixed.reshape(-1)].mean()),
                 "mode": mode.tolist(),
                 "modules": int((mode != EMPTY).sum()),
-                "actuators": int((mode == ACTUATOR).sum()),
+                "actuators": int((mode >= ACTUATOR).sum()),
             }
         )
 
@@ -283,7 +300,7 @@ class DiffsimCodesignRun(DiffsimRun):
         candidates = [self.mode(), *[b["grid"] for b in self.best]]
         unique: list[np.ndarray] = []
         for g in candidates:
-            if (g == ACTUATOR).any() and not any(np.array_equal(g, u) for u in unique):
+            if (g >= ACTUATOR).any() and not any(np.array_equal(g, u) for u in unique):
                 unique.append(g)
         ev = self.spec.evaluation
         scores = self.score(unique, ev.episodes, ev.seed + 1, exact=True)

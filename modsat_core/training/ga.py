@@ -128,7 +128,7 @@ class GARun:
         """``grid`` with the spec's payload cells (if any) and only what is connected to them."""
         if not self.spec.objective.payload_cells:
             return grid
-        fixed, types = fixed_cells(self.spec.design, self.spec.objective)
+        fixed, types = fixed_cells(self.spec.design, self.spec.objective, self.spec.modules)
         return satellites(grid[None], fixed, types)[0]
 
     def _next_generation(self) -> None:

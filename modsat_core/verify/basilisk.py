@@ -16,7 +16,7 @@ import torch
 from modsat_core.grid import ACTUATOR
 from modsat_core.sim import dynamics as dyn
 from modsat_core.sim.mission import EpisodeDraw
-from modsat_core.sim.morphology import mass_properties
+from modsat_core.sim.morphology import design_mass_properties
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.jobspec import Mission, ModuleCatalog
 from modsat_core.verify.flight import ControllerFactory, Flight, commanded_torque
@@ -97,8 +97,8 @@ class BasiliskSatellite:
         from Basilisk.utilities import SimulationBaseClass, macros
 
         self.modules, self.wheels_opt = modules, wheels
-        mp = mass_properties(grid, modules.module_mass_kg, modules.module_size_m)
-        self.unit_positions = (mp.positions_B_m + mp.com_grid_m)[mp.types == ACTUATOR]  # from B's origin
+        mp = design_mass_properties(grid, modules)
+        self.unit_positions = (mp.positions_B_m + mp.com_grid_m)[mp.types >= ACTUATOR]  # from B's origin
         self.K = len(self.unit_positions)
         self.has_wheels = modules.actuator_model == "reaction-wheel"
         self.Js = wheels.inertia_kgm2

@@ -39,7 +39,7 @@ from modsat_core.evaluation.run_folder import RunFolder
 from modsat_core.grid import ACTUATOR, is_valid
 from modsat_core.sim import dynamics as dyn
 from modsat_core.sim.mission import EpisodeDraw
-from modsat_core.sim.morphology import mass_properties
+from modsat_core.sim.morphology import design_mass_properties
 from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design, SlewSim
 from modsat_core.spec.jobspec import JobSpec, Mission, ModuleCatalog, parse_spec
@@ -163,8 +163,8 @@ def plant_report(grid: np.ndarray, mission: Mission, modules: ModuleCatalog, whe
     """What the Basilisk model holds, for the report (docs/verification.md)."""
     from Basilisk.utilities import macros
 
-    mp = mass_properties(grid, modules.module_mass_kg, modules.module_size_m)
-    n_units = int((np.asarray(grid) == ACTUATOR).sum())
+    mp = design_mass_properties(grid, modules)
+    n_units = int((np.asarray(grid) >= ACTUATOR).sum())
     has_wheels = modules.actuator_model == "reaction-wheel"
     try:
         from Basilisk import __version__ as bsk_version
@@ -212,6 +212,11 @@ def verify_run(
     spec = run.spec
     if spec.modules.actuator_model != "reaction-wheel" and wheels != WheelOptions():
         raise ValueError("the run's actuator model is ideal-torque: there are no wheels for the wheel options")
+    if spec.modules.wheels and len(spec.modules.wheels) > 1:
+        raise ValueError(
+            "the run's parts catalog has several wheel types; the Basilisk comparison flies one wheel unit type "
+            "(docs/verification.md)"
+        )
     n = episodes or spec.evaluation.episodes
     draws = evaluation_draws(spec.mission, spec.evaluation, n)
     mission, modules = spec.mission, spec.modules

@@ -189,8 +189,8 @@ def test_a_design_report_is_made_from_its_grid():
         ),
         (
             DesignReport,
-            {"grid": [[[3]]], "grid_size": 1, "valid": True, "modules": 1, "actuators": 0},
-            r"design.json .*0 \(empty\), 1 \(structure\) or 2 \(actuator\)",
+            {"grid": [[[12]]], "grid_size": 1, "valid": True, "modules": 1, "actuators": 0},
+            r"design.json .*0 \(empty\), 1 \(structure\) or 2..9 \(a wheel unit",
         ),
         (DesignReport, {"grid_size": 2}, r"design.json .*grid: Field required"),
         (

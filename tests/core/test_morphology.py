@@ -124,7 +124,7 @@ def test_validity_rules():
     g[1, 0, 0] = STRUCTURE
     assert is_valid(g)
     with pytest.raises(ValueError):
-        validity_problem(np.full((2, 2, 2), 3))
+        validity_problem(np.full((2, 2, 2), 10))  # above the largest wheel type (MAX_CELL 9)
     with pytest.raises(ValueError):
         validity_problem(np.ones((2, 3, 2)))
 

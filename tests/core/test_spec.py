@@ -63,8 +63,10 @@ def test_fixed_design_is_checked():
     disconnected = [[[2, 0], [0, 0]], [[0, 0], [0, 1]]]
     (msg,) = messages({"design": {"grid_size": 2, "fixed_design": disconnected}})
     assert "not face-connected" in msg
+    (msg,) = messages({"design": {"grid_size": 2, "fixed_design": [[[2, 12], [0, 0]], [[0, 0], [0, 0]]]}})
+    assert msg.startswith("design.fixed_design.0.0.1: 12 is out of range") and "<= 9" in msg
     (msg,) = messages({"design": {"grid_size": 2, "fixed_design": [[[2, 3], [0, 0]], [[0, 0], [0, 0]]]}})
-    assert msg.startswith("design.fixed_design.0.0.1: 3 is out of range") and "<= 2" in msg
+    assert "a wheel unit of type 1" in msg and "modules.wheels lists 1 type" in msg
     no_actuator = [[[1, 1], [0, 0]], [[0, 0], [0, 0]]]
     (msg,) = messages({"design": {"grid_size": 2, "fixed_design": no_actuator}})
     assert "no actuator" in msg

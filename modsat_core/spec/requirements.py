@@ -1,0 +1,92 @@
+"""The `requirements` section of a :class:`~modsat_core.spec.jobspec.JobSpec`: what a satellite must do
+and may weigh, stated as an engineer states it (docs/requirements.md).
+
+A design *meets* the requirements when its mass and power are within budget and its own controller, on
+the evaluation's held-out slews, lands at least ``success`` of them within ``settling_time_s`` at the
+mission's tolerance, nominally and under every flight condition the evaluation flies. The slew range
+and the pointing tolerance are the mission's: stated here too, they are checked against it, so a run
+never claims a requirement it did not fly. :func:`verdict` gives the judgement and every reason.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import Field, model_validator
+
+from modsat_core.spec.sections import _Section
+
+
+class Requirements(_Section):
+    """What the satellite must do and may weigh (null fields: no such requirement)."""
+
+    slew_min_deg: float | None = Field(
+        None, ge=0.0, le=180.0, description="Smallest slew it must fly; the mission must fly it too."
+    )
+    slew_max_deg: float | None = Field(
+        None, ge=0.0, le=180.0, description="Largest slew it must fly; the mission must fly it too."
+    )
+    tolerance_deg: float | None = Field(
+        None, gt=0.0, le=180.0, description="Pointing tolerance; equal to `mission.tolerance_deg` (checked)."
+    )
+    settling_time_s: float = Field(
+        gt=0.0, le=10_000.0, description="Each landed slew must settle (pointing and rate) within this time, s."
+    )
+    success: float = Field(
+        0.99,
+        gt=0.0,
+        le=1.0,
+        description=(
+            "Share of the evaluation's slews that must land within `settling_time_s`, nominally and under each "
+            "flight condition of `evaluation.conditions`."
+        ),
+    )
+    mass_budget_kg: float | None = Field(None, gt=0.0, le=100_000.0, description="Largest total mass, kg.")
+    power_budget_W: float | None = Field(
+        None, gt=0.0, le=100_000.0, description="Largest steady power of the wheels, W (needs their `power_W`)."
+    )
+
+    @model_validator(mode="after")
+    def _range(self) -> Requirements:
+        lo, hi = self.slew_min_deg, self.slew_max_deg
+        if lo is not None and hi is not None and lo > hi:
+            raise ValueError(f"slew_min_deg ({lo}) must not exceed slew_max_deg ({hi})")
+        return self
+
+
+def landed_within(episodes: list[dict[str, Any]], settling_time_s: float) -> float:
+    """Share of ``episodes`` (monte_carlo rows) that land and settle within ``settling_time_s``."""
+    if not episodes:
+        return 0.0
+    ok = [e for e in episodes if e.get("success") and (e.get("settling_time_s") or 0.0) <= settling_time_s]
+    return len(ok) / len(episodes)
+
+
+def verdict(
+    req: Requirements,
+    mass_kg: float,
+    power_W: float | None,
+    shares: dict[str, float],
+) -> dict[str, Any]:
+    """Whether a design meets ``req``: its ``mass_kg``, ``power_W`` and, per flight (``nominal`` and each
+    condition), the share of slews landed within the settling time. Returns ``{"meets", "reasons",
+    "mass_kg", "power_W", "landed_within_settling_time"}``; ``reasons`` names every requirement missed."""
+    reasons: list[str] = []
+    if req.mass_budget_kg is not None and mass_kg > req.mass_budget_kg:
+        reasons.append(f"mass {mass_kg:.2f} kg is over the budget of {req.mass_budget_kg:g} kg")
+    if req.power_budget_W is not None and (power_W is None or power_W > req.power_budget_W):
+        got = "unknown" if power_W is None else f"{power_W:.2f} W"
+        reasons.append(f"power {got} is over the budget of {req.power_budget_W:g} W")
+    for name, share in shares.items():
+        if share < req.success:
+            reasons.append(
+                f"{name}: {100 * share:.0f} % of the slews settle within {req.settling_time_s:g} s "
+                f"(required {100 * req.success:.0f} %)"
+            )
+    return {
+        "meets": not reasons,
+        "reasons": reasons,
+        "mass_kg": mass_kg,
+        "power_W": power_W,
+        "landed_within_settling_time": shares,
+    }
