@@ -118,6 +118,13 @@ class JobSpec(_Section):
                 f"modules.wheels and modules.payload (the parts catalog) fly with the first-order learner "
                 f"(`diffsim-control`, `diffsim-codesign`), not {self.algorithm!r}"
             )
+        if self.objective.trade_off_prices_s_per_kg and (
+            self.algorithm != "diffsim-codesign" or self.diffsim.design_gradient != "score-function"
+        ):
+            raise ValueError(
+                "objective.trade_off_prices_s_per_kg: the trade-off is a `diffsim-codesign` run with the "
+                "`score-function` design gradient"
+            )
         if m.wheels and self.algorithm == "diffsim-codesign" and self.diffsim.design_gradient == "relaxed":
             raise ValueError("diffsim.design_gradient `relaxed` relaxes one wheel unit type: leave modules.wheels out")
         r = self.requirements

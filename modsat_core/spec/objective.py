@@ -38,6 +38,16 @@ class Objective(_Section):
             "(`modules`: structure, each wheel unit type, the payload), added to the module and wheel prices."
         ),
     )
+    trade_off_prices_s_per_kg: list[Annotated[float, Field(ge=0.0, le=1000.0)]] = Field(
+        default_factory=list,
+        max_length=12,
+        description=(
+            "`diffsim-codesign`: mass prices (s per kg), one design distribution each, all flown by one controller; "
+            "the run returns the Pareto front of flown designs over mass and median settling time and keeps the "
+            "lightest that meets `requirements` (docs/requirements.md). Empty: one distribution, one design, "
+            "priced by `mass_price_s_per_kg`."
+        ),
+    )
     payload_cells: list[tuple[_Index, _Index, _Index]] = Field(
         default_factory=list,
         max_length=1000,
@@ -46,6 +56,15 @@ class Objective(_Section):
             "face-connected to each other. Empty: the design grows from the centre cell, an actuator."
         ),
     )
+
+    @field_validator("trade_off_prices_s_per_kg")
+    @classmethod
+    def _prices(cls, v: list[float]) -> list[float]:
+        if len(v) == 1:
+            raise ValueError("a trade-off needs at least two prices (one is `mass_price_s_per_kg`)")
+        if len(set(v)) != len(v):
+            raise ValueError("trade_off_prices_s_per_kg must be distinct")
+        return sorted(v)
 
     @field_validator("payload_cells")
     @classmethod

@@ -131,6 +131,42 @@ def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
     )
 
 
+def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float) -> JobSpec:
+    """A trade-off preset (docs/requirements.md): a payload plate (the k = 0 layer, ``payload_kg`` a cell),
+    0.2 kg structure modules, wheel units of two real CubeSat wheels, `requirements`, four mass prices,
+    trained under the flight conditions."""
+    step = 256 * 32
+    return JobSpec.model_validate(
+        {
+            "name": f"trade-off-{n}x{n}x{n}",
+            "algorithm": "diffsim-codesign",
+            "design": {"grid_size": n},
+            "modules": {
+                "module_mass_kg": 0.2,
+                "wheels": ["bct-rwp015", "nanoavionics-rw0"],
+                "payload": {"cells": [[i, j, 0] for i in range(n) for j in range(n)], "mass_kg": payload_kg},
+            },
+            "mission": {
+                "slew_min_deg": 30.0,
+                "slew_max_deg": 90.0,
+                "tolerance_deg": 0.25,
+                "episode_steps": 360,
+                "reward": _HOLD_REWARD,
+            },
+            "requirements": requirements,
+            "objective": {"trade_off_prices_s_per_kg": [0.1, 0.3, 1.0, 3.0]},
+            "randomise": FLIGHT_READY,
+            "training": {
+                "total_env_steps": updates * step,
+                "eval_every_steps": updates // 4 * step,
+                "eval_episodes": 16,
+                "checkpoint_every_steps": updates // 4 * step,
+                "device": "cpu",
+            },
+        }
+    )
+
+
 PRESETS: dict[str, JobSpec] = {
     "paper-3x3x3": _paper(3, PAPER_TAU_3X3X3_NM, "td3-codesign"),
     "paper-5x5x5": _paper(5, PAPER_TAU_5X5X5_NM, "td3-codesign"),
@@ -189,6 +225,20 @@ PRESETS: dict[str, JobSpec] = {
     # Co-design by the first-order learner on a priced objective (docs/diffsim.md, "Co-design").
     "diffsim-3x3x3": _diffsim_codesign(3, 240),
     "diffsim-5x5x5": _diffsim_codesign(5, 240),
+    # The trade-off over mass and settling time, with real parts and an engineer's requirements
+    # (docs/requirements.md has the catalog, the requirements and what the presets land).
+    "trade-off-3x3x3": _trade_off(
+        3,
+        240,
+        {
+            "slew_max_deg": 90.0,
+            "tolerance_deg": 0.25,
+            "settling_time_s": 20.0,
+            "success": 0.99,
+            "mass_budget_kg": 9.0,
+        },
+        payload_kg=0.5,
+    ),
     "cpu-3x3x3": JobSpec.model_validate(
         {
             "name": "cpu-3x3x3",

@@ -27,6 +27,7 @@ from modsat_core.training.checkpoint import (
 )
 from modsat_core.training.diffsim import DiffsimRun
 from modsat_core.training.diffsim_codesign import DiffsimCodesignRun
+from modsat_core.training.diffsim_pareto import ParetoRun
 from modsat_core.training.ga import GARun
 from modsat_core.training.td3_trainer import TD3Run
 
@@ -60,7 +61,9 @@ def train(
         )
     device = resolve_device(spec.training.device)
     run: TD3Run | DiffsimRun
-    if spec.algorithm == "diffsim-codesign":
+    if spec.algorithm == "diffsim-codesign" and spec.objective.trade_off_prices_s_per_kg:
+        run = ParetoRun(spec, device=device)
+    elif spec.algorithm == "diffsim-codesign":
         run = DiffsimCodesignRun(spec, device=device)
     else:
         run = DiffsimRun(spec, device=device) if is_diffsim(spec) else TD3Run(spec, device=device)

@@ -1,0 +1,361 @@
+"""The trade-off: `diffsim-codesign` with ``objective.trade_off_prices_s_per_kg`` returns the Pareto front of
+flown designs over total mass and median settling time, each point flown by the run's one flight-ready,
+design-conditioned controller, and names the lightest design that meets ``requirements``
+(docs/requirements.md).
+
+The method: one design distribution per mass price ``lambda_l`` of the list, all sharing the controller.
+Each distribution is :class:`~modsat_core.training.diffsim_codesign.DiffsimCodesignRun`'s (per-cell type
+logits over empty, structure and every wheel type of the parts catalog; the payload fixed; a drawn grid
+is what stays face-connected to it), scored by the objective with its own price: mean settling time (a
+failed slew counts the episode) plus the module and wheel prices plus ``lambda_l`` times the design's
+mass from the catalog. At each design update every distribution draws ``design_batch / L`` grids (at least
+4); all are flown together on the same ``design_slews`` slews; each distribution takes its REINFORCE step
+on its own draws. The controller trains on the draws of all of them (under ``randomise``: the flight
+conditions), so that it flies the whole range of masses and wheel sets the front spans. A cheap price
+pulls its distribution to heavy, well-actuated satellites, a dear one to the lightest that still land.
+
+At the end the candidates (each distribution's mode and its best draws) fly the validation slews
+(``evaluation.episodes``, the mission's physics, float64). Their non-dominated set over (mass, median
+settling time) among those that land every slew (moocore) are the front; each front point then flies every
+flight condition of ``evaluation.conditions`` and gets the requirements' verdict. The run's kept design is
+the lightest front point that meets the requirements, else the front point of least objective at the
+middle price (the final evaluation says then that no front point meets them, with every reason).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any
+
+import numpy as np
+import torch
+
+from modsat_core.agent.policy import controller_for
+from modsat_core.agent.policy_file import actor_from_state
+from modsat_core.evaluation.monte_carlo import monte_carlo, monte_carlo_conditions
+from modsat_core.grid import ACTUATOR, EMPTY
+from modsat_core.sim.slew import Design
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.parts import design_mass_kg, design_power_W
+from modsat_core.spec.requirements import landed_within, verdict
+from modsat_core.training.diffsim import DiffsimRun, training_mission
+from modsat_core.training.diffsim_codesign import TOP_DRAWS, fixed_cells, satellites
+
+#: Fewest draws a distribution takes at a design update.
+MIN_DRAWS = 4
+
+
+def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[list[dict]]:
+    """Each grid flown by ``policy`` on the same ``slews`` slews of ``seed``: its monte_carlo rows (the
+    training physics in float32, or the mission's in float64 when ``exact``). A grid without a wheel
+    unit gets no rows."""
+    mission = spec.mission if exact else training_mission(spec.mission, spec.diffsim.substeps)
+    valid = [i for i, g in enumerate(grids) if (g >= ACTUATOR).any()]
+    out: list[list[dict]] = [[] for _ in grids]
+    if not valid:
+        return out
+    designs = [Design.from_grid(grids[i], spec.modules) for i in valid for _ in range(slews)]
+    controller = controller_for(policy, grids[valid[0]], spec)
+    with torch.no_grad():
+        mc = monte_carlo(
+            designs,
+            controller,
+            mission,
+            spec.modules,
+            episodes=len(designs),
+            seed=seed,
+            dtype=torch.float64 if exact else torch.float32,
+            slews=slews,
+        )
+    for j, i in enumerate(valid):
+        out[i] = mc.episodes[j * slews : (j + 1) * slews]
+    return out
+
+
+def mean_time_s(episodes: list[dict], episode_s: float) -> float:
+    """Mean settling time, a failed slew counting the whole episode (no rows: worse than any design)."""
+    if not episodes:
+        return 2.0 * episode_s
+    return float(np.mean([e["settling_time_s"] if e["success"] else episode_s for e in episodes]))
+
+
+def median_settling_s(episodes: list[dict], episode_s: float) -> float:
+    """Median settling time, a failed slew counting the whole episode."""
+    if not episodes:
+        return episode_s
+    return float(np.median([e["settling_time_s"] if e["success"] else episode_s for e in episodes]))
+
+
+def nondominated(points: np.ndarray) -> np.ndarray:
+    """(P,) bool: the points (P, 2) no other point is at least as good as in both and better in one
+    (moocore's; minimised)."""
+    import moocore
+
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    return np.asarray(moocore.is_nondominated(np.asarray(points, dtype=np.float64)), dtype=bool)
+
+
+def hypervolume(points: np.ndarray, ref: tuple[float, float]) -> float:
+    """The area (kg s) the points (P, 2) dominate up to ``ref`` (moocore's hypervolume; minimised)."""
+    import moocore
+
+    pts = np.asarray([p for p in np.asarray(points, dtype=np.float64) if p[0] < ref[0] and p[1] < ref[1]])
+    if len(pts) == 0:
+        return 0.0
+    return float(moocore.hypervolume(pts, ref=np.asarray(ref, dtype=np.float64)))
+
+
+def reference_point(spec: JobSpec) -> tuple[float, float]:
+    """The hypervolume's reference: the heaviest satellite the grid holds (every free cell the heaviest
+    wheel unit, the payload) and the whole episode."""
+    N = spec.design.grid_size
+    fixed, types = fixed_cells(spec.design, spec.objective, spec.modules)
+    n_types = len(spec.modules.wheels) if spec.modules.wheels else 1
+    heaviest = max(
+        design_mass_kg(np.where(fixed, types, np.full((N,) * 3, ACTUATOR + k)), spec.modules) for k in range(n_types)
+    )
+    return float(heaviest), spec.mission.episode_steps * spec.mission.control_dt_s
+
+
+def point_record(spec: JobSpec, grid: np.ndarray, episodes: list[dict], episode_s: float) -> dict[str, Any]:
+    """A flown design's figures: its parts, mass, power, median settling time and success."""
+    g = np.asarray(grid)
+    n_types = len(spec.modules.wheels) if spec.modules.wheels else 1
+    names = [w.name for w in spec.modules.wheels] if spec.modules.wheels else ["wheel-unit"]
+    return {
+        "grid": g.tolist(),
+        "modules": int((g != EMPTY).sum()),
+        "wheel_units": {names[k]: int((g == ACTUATOR + k).sum()) for k in range(n_types)},
+        "mass_kg": design_mass_kg(g, spec.modules),
+        "power_W": design_power_W(g, spec.modules),
+        "median_settling_s": median_settling_s(episodes, episode_s),
+        "success": sum(bool(e["success"]) for e in episodes) / max(1, len(episodes)),
+    }
+
+
+class ParetoRun(DiffsimRun):
+    """One trade-off run (the module docstring)."""
+
+    def __init__(self, spec: JobSpec, device: str = "cpu"):
+        N = spec.design.grid_size
+        self.prices = list(spec.objective.trade_off_prices_s_per_kg)
+        L = len(self.prices)
+        self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective, spec.modules)
+        types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
+        self.logits = torch.zeros(L, N**3, types, dtype=torch.float64, requires_grad=True)
+        self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
+        self.design_rng = np.random.default_rng([spec.seed, 5])
+        self.records: list[dict] = []
+        self.best: list[list[dict]] = [[] for _ in range(L)]  # per price: {"grid", "objective_s"}, best first
+        self.front: list[dict] = []
+        super().__init__(spec, device)
+
+    # ------------------------------------------------------------------ the distributions
+    def probabilities(self, l: int) -> np.ndarray:
+        return torch.softmax(self.logits[l].detach(), dim=-1).numpy()
+
+    def draw(self, M: int, l: int) -> tuple[np.ndarray, np.ndarray]:
+        N = self.spec.design.grid_size
+        p = self.probabilities(l)
+        u = self.design_rng.random((M, N**3, 1))
+        raw = (u > np.cumsum(p, axis=-1)[None, :, :-1]).sum(-1).reshape(M, N, N, N)
+        raw = np.where(self.fixed, self.fixed_types, raw)
+        return satellites(raw, self.fixed, self.fixed_types), raw
+
+    def mode(self, l: int) -> np.ndarray:
+        N = self.spec.design.grid_size
+        raw = self.probabilities(l).argmax(-1).reshape(1, N, N, N)
+        return satellites(raw, self.fixed, self.fixed_types)[0]
+
+    def log_prob(self, raw: np.ndarray, l: int) -> torch.Tensor:
+        logp = torch.log_softmax(self.logits[l], dim=-1)
+        idx = torch.as_tensor(raw.reshape(len(raw), -1))
+        free = torch.as_tensor(~self.fixed.reshape(-1), dtype=torch.float64)
+        return (logp.gather(1, idx.T).T * free).sum(-1)
+
+    @property
+    def draws_each(self) -> int:
+        return max(MIN_DRAWS, self.d.design_batch // len(self.prices))
+
+    def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
+        """A design with the strongest wheel unit in every free cell first (a simulator slot for every
+        wheel a draw can have), then every distribution's first draws that are valid."""
+        N = self.spec.design.grid_size
+        every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
+        every[self.fixed] = self.fixed_types[self.fixed]
+        drawn = [g for l in range(len(self.prices)) for g in self.draw(self.draws_each, l)[0]]
+        flyable = [g for g in drawn if (g >= ACTUATOR).any()]
+        return (flyable or [every])[0], [every, *flyable]
+
+    # ------------------------------------------------------------------ one design update
+    def objective(self, time_s: float, grid: np.ndarray, price: float) -> float:
+        obj = self.spec.objective
+        g = np.asarray(grid)
+        modules, wheels = int((g != EMPTY).sum()), int((g >= ACTUATOR).sum())
+        return (
+            time_s
+            + obj.module_price_s * modules
+            + obj.wheel_price_s * wheels
+            + price * design_mass_kg(g, self.spec.modules)
+        )
+
+    def design_update(self) -> None:
+        L, M = len(self.prices), self.draws_each
+        draws = [self.draw(M, l) for l in range(L)]
+        grids = [g for grids, _ in draws for g in grids]
+        seed = int(self.design_rng.integers(2**31))
+        policy = copy.deepcopy(self.policy).cpu().eval()
+        episode_s = self.spec.mission.episode_steps * self.spec.mission.control_dt_s
+        flown = fly(self.spec, policy, grids, self.d.design_slews, seed, exact=False)
+        times = [mean_time_s(e, episode_s) for e in flown]
+        self.design_opt.zero_grad(set_to_none=True)
+        loss = torch.zeros((), dtype=torch.float64)
+        record: dict[str, Any] = {"updates": self.updates, "env_steps": self.env_steps, "prices": []}
+        for l, (lg, raw) in enumerate(draws):
+            J = np.asarray([self.objective(times[l * M + i], g, self.prices[l]) for i, g in enumerate(lg)])
+            adv = torch.as_tensor((J - J.mean()) / (J.std() + 1e-8))
+            loss = loss + (adv * self.log_prob(raw, l)).mean()
+            for g, j in sorted(zip(list(lg), J.tolist(), strict=True), key=lambda x: x[1])[:TOP_DRAWS]:
+                if (g >= ACTUATOR).any() and not any(np.array_equal(g, b["grid"]) for b in self.best[l]):
+                    self.best[l].append({"grid": g, "objective_s": j})
+            self.best[l] = sorted(self.best[l], key=lambda b: b["objective_s"])[:TOP_DRAWS]
+            mode = self.mode(l)
+            record["prices"].append(
+                {
+                    "price_s_per_kg": self.prices[l],
+                    "mean_objective_s": float(J.mean()),
+                    "best_objective_s": float(J.min()),
+                    "mode_mass_kg": design_mass_kg(mode, self.spec.modules),
+                    "mode_wheel_units": int((mode >= ACTUATOR).sum()),
+                }
+            )
+        loss.backward()
+        self.design_opt.step()
+        middle = self.mode(L // 2)
+        self.grid = middle if (middle >= ACTUATOR).any() else self.best[L // 2][0]["grid"]
+        fresh = [g for g in [self.grid, *grids] if (g >= ACTUATOR).any()]
+        start = len(self.pool)
+        self.pool += [Design.from_grid(g, self.spec.modules) for g in fresh]
+        self.active = (start, len(self.pool))
+        self.records.append(record)
+
+    def update(self) -> dict[str, float]:
+        out = super().update()
+        if self.updates % self.d.design_every == 0:
+            self.design_update()
+        return out
+
+    # ------------------------------------------------------------------ the front
+    def candidates(self) -> list[tuple[np.ndarray, float]]:
+        """Each distribution's mode and best draws, once each, with the price they came from."""
+        out: list[tuple[np.ndarray, float]] = []
+        for l, price in enumerate(self.prices):
+            for g in [self.mode(l), *[b["grid"] for b in self.best[l]]]:
+                if (g >= ACTUATOR).any() and not any(np.array_equal(g, u) for u, _ in out):
+                    out.append((g, price))
+        return out
+
+    def trade_off(self, policy: torch.nn.Module) -> tuple[list[dict], list[dict]]:
+        """Every candidate flown on the validation slews, and the front: the non-dominated ones that land
+        every slew, each flown under every flight condition with its requirements' verdict."""
+        spec, ev = self.spec, self.spec.evaluation
+        episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
+        cands = self.candidates() or [(self.grid, self.prices[len(self.prices) // 2])]
+        pol = copy.deepcopy(policy).cpu().double().eval()
+        flown = fly(spec, pol, [g for g, _ in cands], ev.episodes, ev.seed + 1, exact=True)
+        records = []
+        for (g, price), episodes in zip(cands, flown, strict=True):
+            r = point_record(spec, g, episodes, episode_s)
+            r["price_s_per_kg"] = price
+            r["objective_s"] = self.objective(mean_time_s(episodes, episode_s), g, price)
+            r["_episodes"] = episodes
+            records.append(r)
+        landed = [r for r in records if r["success"] >= 1.0] or records
+        pts = np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in landed])
+        front = sorted(
+            [r for r, keep in zip(landed, nondominated(pts), strict=True) if keep], key=lambda r: r["mass_kg"]
+        )
+        limit = spec.requirements.settling_time_s if spec.requirements is not None else math.inf
+        for r in front:
+            grid = np.asarray(r["grid"], dtype=np.int64)
+            shares = {"nominal": landed_within(r["_episodes"], limit)}
+            conds: dict[str, float] = {}
+            if ev.conditions:
+                design = Design.from_grid(grid, spec.modules)
+                with torch.no_grad():
+                    res = monte_carlo_conditions(
+                        design,
+                        controller_for(pol, grid, spec),
+                        spec.mission,
+                        spec.modules,
+                        ev.conditions,
+                        episodes=ev.episodes,
+                        seed=ev.seed,
+                        dtype=torch.float64,
+                    )
+                for c in ev.conditions:
+                    eps = res[c.name].episodes
+                    conds[c.name] = sum(bool(e["success"]) for e in eps) / len(eps)
+                    shares[c.name] = landed_within(eps, limit)
+            r["conditions"] = conds
+            if spec.requirements is not None:
+                v = verdict(spec.requirements, r["mass_kg"], r["power_W"], shares)
+                r["meets"], r["reasons"] = v["meets"], v["reasons"]
+        for r in records:
+            r.pop("_episodes")
+        return records, front
+
+    def chosen(self) -> tuple[torch.nn.Module, np.ndarray, dict]:
+        """The controller at the end of training and the kept design (the module docstring)."""
+        records, front = self.trade_off(self.policy)
+        meeting = [r for r in front if r.get("meets")]
+        if meeting:
+            kept = min(meeting, key=lambda r: r["mass_kg"])
+        else:
+            middle = self.prices[len(self.prices) // 2]
+            kept = min(front, key=lambda r: self.objective(r["median_settling_s"], np.asarray(r["grid"]), middle))
+        self.front = front
+        ref = reference_point(self.spec)
+        extra: dict[str, Any] = {
+            "designs": self.records,
+            "selection": records,
+            "front": front,
+            "front_reference": {"mass_kg": ref[0], "settling_s": ref[1]},
+            "front_hypervolume": hypervolume(np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in front]), ref),
+            "kept": {"grid": kept["grid"], "meets_requirements": bool(kept.get("meets", False))},
+        }
+        actor = actor_from_state(self.spec, {k: v.cpu() for k, v in self.policy.state_dict().items()})
+        return actor, np.asarray(kept["grid"], dtype=np.int64), extra
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_dict(self) -> dict:
+        d = super().state_dict()
+        d["pareto"] = {
+            "logits": self.logits.detach().clone(),
+            "design_opt": self.design_opt.state_dict(),
+            "design_rng": self.design_rng.bit_generator.state,
+            "records": copy.deepcopy(self.records),
+            "best": [[{"grid": b["grid"].tolist(), "objective_s": b["objective_s"]} for b in bl] for bl in self.best],
+            "pool": [d.grid.tolist() for d in self.pool],
+            "active": list(self.active),
+            "grid": self.grid.tolist(),
+        }
+        return d
+
+    def load_state_dict(self, d: dict) -> None:
+        c = d["pareto"]
+        with torch.no_grad():
+            self.logits.copy_(c["logits"])
+        self.design_opt.load_state_dict(c["design_opt"])
+        self.design_rng.bit_generator.state = c["design_rng"]
+        self.records = list(c["records"])
+        self.best = [
+            [{"grid": np.asarray(b["grid"], dtype=np.int64), "objective_s": b["objective_s"]} for b in bl]
+            for bl in c["best"]
+        ]
+        self.pool = [Design.from_grid(np.asarray(g, dtype=np.int64), self.spec.modules) for g in c["pool"]]
+        self.active = (int(c["active"][0]), int(c["active"][1]))
+        super().load_state_dict(d)
+        self.grid = np.asarray(c["grid"], dtype=np.int64)

@@ -1,0 +1,117 @@
+"""The trade-off (`diffsim-codesign` with `objective.trade_off_prices_s_per_kg`): one distribution per mass
+price, one controller, the front of flown designs over mass and settling time, the kept design the
+lightest that meets the requirements, the run's files and resume; the bench's front arithmetic."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from modsat_core.bench.pareto import beats, random_designs
+from modsat_core.grid import ACTUATOR, STRUCTURE, is_valid
+from modsat_core.spec.jobspec import JobSpec
+from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
+from modsat_core.training.diffsim_pareto import ParetoRun, hypervolume, nondominated
+from modsat_core.training.train import train
+
+WHEELS = [
+    {"name": "small", "torque_Nm": 0.02, "momentum_Nms": 0.05, "mass_kg": 0.2, "power_W": 0.5},
+    {"name": "big", "torque_Nm": 0.05, "momentum_Nms": 0.2, "mass_kg": 0.8, "power_W": 1.5},
+]
+
+
+def tiny_trade_off(**over) -> JobSpec:
+    """A trade-off on a 2x2x2 grid that trains in seconds (mechanics, not quality)."""
+    d: dict = {
+        "name": "tiny-trade-off",
+        "algorithm": "diffsim-codesign",
+        "seed": 3,
+        "design": {"grid_size": 2},
+        "modules": {
+            "module_mass_kg": 0.3,
+            "wheels": WHEELS,
+            "payload": {"cells": [[0, 0, 0], [0, 0, 1]], "mass_kg": 1.0},
+        },
+        "mission": {"episode_steps": 24, "tolerance_deg": 1.0, "slew_min_deg": 5, "slew_max_deg": 20},
+        "requirements": {"settling_time_s": 1.9, "success": 0.5, "mass_budget_kg": 20.0, "power_budget_W": 30.0},
+        "training": {"total_env_steps": 6 * 32, "eval_every_steps": 64, "eval_episodes": 3},
+        "diffsim": {
+            "batch_size": 8,
+            "window_steps": 4,
+            "episode_steps": 12,
+            "substeps": 2,
+            "hidden_sizes": [8],
+            "design_batch": 8,
+            "design_slews": 2,
+            "design_every": 2,
+        },
+        "objective": {"trade_off_prices_s_per_kg": [0.01, 1.0]},
+        "evaluation": {"episodes": 4, "trajectories": 1, "conditions": ["delay-1", "weak-wheels"]},
+    }
+    for key, value in over.items():
+        section, _, field = key.partition("__")
+        d[section][field] = value
+    return JobSpec.model_validate(d)
+
+
+def test_each_price_has_its_own_distribution_over_every_part():
+    run = ParetoRun(tiny_trade_off())
+    assert run.logits.shape == (2, 8, 4)  # prices, cells, {empty, structure, small, big}
+    grids, raw = run.draw(64, 1)
+    for g, r in zip(grids, raw, strict=True):
+        assert g[0, 0, 0] == g[0, 0, 1] == STRUCTURE
+        assert set(np.unique(g)) <= {0, 1, 2, 3}
+        if (g >= ACTUATOR).any():
+            assert is_valid(g)
+    assert {2, 3} <= set(np.unique(raw))  # both wheel types are drawn
+
+
+def test_a_trade_off_run_returns_its_front_keeps_the_lightest_that_meets_and_resumes_the_same():
+    spec = tiny_trade_off()
+    files = train(spec).artifacts()
+    curve = json.loads(files["curve.json"])
+    front, selection = curve["front"], curve["selection"]
+    assert front and len(curve["designs"]) == 3 and len(curve["designs"][0]["prices"]) == 2
+    # the front is the non-dominated set, over (mass, median settling), of the candidates that land every slew
+    landed = [s for s in selection if s["success"] >= 1.0] or selection
+    pts = np.asarray([[s["mass_kg"], s["median_settling_s"]] for s in landed])
+    want = sorted(s["mass_kg"] for s, k in zip(landed, nondominated(pts), strict=True) if k)
+    assert [p["mass_kg"] for p in front] == want
+    for p in front:  # each point flew every condition and got a verdict
+        assert set(p["conditions"]) == {"delay-1", "weak-wheels"} and isinstance(p["meets"], bool)
+        assert p["power_W"] is not None and p["power_W"] > 0
+    kept = json.loads(files["design.json"])["grid"]
+    meeting = [p for p in front if p["meets"]]
+    if meeting:
+        assert kept == min(meeting, key=lambda p: p["mass_kg"])["grid"]
+    assert any(p["grid"] == kept for p in front)
+    assert curve["kept"]["meets_requirements"] == bool(meeting)
+    ev = json.loads(files["evaluation.json"])
+    assert ev["requirements"]["meets"] == all(
+        ev["requirements"]["landed_within_settling_time"][k] >= 0.5 for k in ("nominal", "delay-1", "weak-wheels")
+    ) and ev["requirements"]["mass_kg"] <= 20.0
+    ref = (curve["front_reference"]["mass_kg"], curve["front_reference"]["settling_s"])
+    assert ref[1] == 24 / 12 and curve["front_hypervolume"] == hypervolume(
+        np.asarray([[p["mass_kg"], p["median_settling_s"]] for p in front]), ref
+    )
+    ckpts: list[dict] = []
+    stops = iter([False, False, False, True])
+    first = train(spec, on_checkpoint=ckpts.append, should_stop=lambda: next(stops, False))
+    assert first.stopped
+    resumed = train(spec, checkpoint=checkpoint_from_bytes(checkpoint_to_bytes(ckpts[-1])))
+    assert resumed.artifacts()["curve.json"] == files["curve.json"]
+
+
+def test_the_fronts_arithmetic():
+    pts = np.asarray([[1.0, 5.0], [2.0, 3.0], [3.0, 4.0], [4.0, 1.0]])
+    assert nondominated(pts).tolist() == [True, True, False, True]
+    # (ref - point) rectangles' union: from ref (5, 6), points (1, 5), (2, 3), (4, 1)
+    assert hypervolume(pts[[0, 1, 3]], (5.0, 6.0)) == 1 * 1 + 2 * 3 + 1 * 5 + 0
+    front = [{"mass_kg": 2.0, "median_settling_s": 3.0}]
+    better = {"mass_kg": 1.9, "median_settling_s": 2.9}  # 5 % and 3 % better: beats it
+    close = {"mass_kg": 1.99, "median_settling_s": 2.0}  # 0.5 % lighter only: does not
+    assert beats([better, close], front) == 1
+    spec = tiny_trade_off()
+    for g in random_designs(spec, 20, 0):
+        assert is_valid(g) and g[0, 0, 0] == STRUCTURE
