@@ -129,6 +129,28 @@ def _cmd_bench_codesign(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_pareto(args: argparse.Namespace) -> int:
+    set_threads(None)
+    from modsat_core.bench.pareto import bench_pareto
+    from modsat_core.spec.presets import get_preset
+
+    try:  # a preset that is not a trade-off is a readable error before any training
+        spec = get_preset(args.preset)
+    except KeyError as exc:
+        raise SystemExit(f"modsat bench pareto: {exc.args[0]}") from None
+    if not spec.objective.trade_off_prices_s_per_kg:
+        raise SystemExit(
+            f"modsat bench pareto: preset {args.preset!r} is not a trade-off (no objective.trade_off_prices_s_per_kg)"
+        )
+    for name in ("designs", "slews"):
+        if getattr(args, name) < 1:
+            raise SystemExit(f"modsat bench pareto: --{name} must be at least 1")
+    prepare_report_path(args.out)
+    report = bench_pareto(args.preset, args.seeds, args.designs, args.slews)
+    print_report(report, args.out)
+    return 0
+
+
 def _cmd_bench_learners(args: argparse.Namespace) -> int:
     set_threads(None)
     from modsat_core.bench.learners import DESIGNS, DIFFSIM_STEPS, bench_learners
@@ -236,6 +258,18 @@ def add_bench_parsers(sub) -> None:
     bd.add_argument("--slews", type=int, default=32, help="slews per held-out design (default 32)")
     bd.add_argument("--out", help="also write the JSON report to this file")
     bd.set_defaults(func=_cmd_bench_designs, threads=None)
+
+    bp = bsub.add_parser(
+        "pareto",
+        help="the trade-off run's front against NSGA-II's and random designs', one controller (JSON)",
+    )
+    bp.add_argument("--preset", default="trade-off-3x3x3", help="a trade-off preset (default trade-off-3x3x3)")
+    bp.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds (default 0)")
+    bp.add_argument("--designs", type=int, default=100, help="random designs (default 100)")
+    bp.add_argument("--slews", type=int, default=32, help="bench slews each design flies (default 32)")
+    bp.add_argument("--json", action="store_true", help="accepted for symmetry: the report is JSON")
+    bp.add_argument("--out", help="also write the JSON report to this file")
+    bp.set_defaults(func=_cmd_bench_pareto, threads=None)
 
     bcd = bsub.add_parser(
         "codesign",
