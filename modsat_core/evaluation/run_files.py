@@ -33,7 +33,7 @@ from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.parts import design_mass_kg, design_power_W
-from modsat_core.spec.requirements import landed_within, verdict
+from modsat_core.spec.requirements import judged, landed_within, verdict
 
 #: Final-evaluation tolerances reported beside the mission's own.
 REPORT_TOLERANCES_DEG = (0.25, 1.0)
@@ -143,7 +143,11 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     if spec.requirements is not None:
         limit = spec.requirements.settling_time_s
         shares = {"nominal": landed_within(mc.episodes, limit)}
-        shares.update({c["name"]: c.pop("_within") for c in out["conditions"]})
+        judge = {c.name for c in spec.evaluation.conditions if judged(c, spec.requirements, spec.mission)}
+        for c in out["conditions"]:
+            within = c.pop("_within")
+            if c["name"] in judge:
+                shares[c["name"]] = within
         out["requirements"] = verdict(
             spec.requirements, design_mass_kg(grid, spec.modules), design_power_W(grid, spec.modules), shares
         )

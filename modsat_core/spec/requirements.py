@@ -3,7 +3,8 @@ and may weigh, stated as an engineer states it (docs/requirements.md).
 
 A design *meets* the requirements when its mass and power are within budget and its own controller, on
 the evaluation's held-out slews, lands at least ``success`` of them within ``settling_time_s`` at the
-mission's tolerance, nominally and under every flight condition the evaluation flies. The slew range
+mission's tolerance, nominally and under every flight condition the evaluation flies whose slews lie in
+the required range (:func:`judged`; `large-slews` does not judge a satellite required to slew to 90 deg). The slew range
 and the pointing tolerance are the mission's: stated here too, they are checked against it, so a run
 never claims a requirement it did not fly. :func:`verdict` gives the judgement and every reason.
 """
@@ -14,7 +15,8 @@ from typing import Any
 
 from pydantic import Field, model_validator
 
-from modsat_core.spec.sections import _Section
+from modsat_core.spec.evaluation import Condition
+from modsat_core.spec.sections import Mission, _Section
 
 
 class Requirements(_Section):
@@ -52,6 +54,17 @@ class Requirements(_Section):
         if lo is not None and hi is not None and lo > hi:
             raise ValueError(f"slew_min_deg ({lo}) must not exceed slew_max_deg ({hi})")
         return self
+
+
+def judged(condition: Condition, req: Requirements, mission: Mission) -> bool:
+    """Whether ``condition`` counts in the verdict: not when it flies slews outside the range the
+    requirements ask for (the mission's where they state none), such as `large-slews` for a satellite
+    required to slew to 90 deg. Such a condition is still flown and reported."""
+    lo = req.slew_min_deg if req.slew_min_deg is not None else mission.slew_min_deg
+    hi = req.slew_max_deg if req.slew_max_deg is not None else mission.slew_max_deg
+    c_lo = condition.slew_min_deg if condition.slew_min_deg is not None else mission.slew_min_deg
+    c_hi = condition.slew_max_deg if condition.slew_max_deg is not None else mission.slew_max_deg
+    return lo - 1e-9 <= c_lo and c_hi <= hi + 1e-9
 
 
 def landed_within(episodes: list[dict[str, Any]], settling_time_s: float) -> float:

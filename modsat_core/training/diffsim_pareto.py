@@ -38,7 +38,7 @@ from modsat_core.grid import ACTUATOR, EMPTY
 from modsat_core.sim.slew import Design
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.parts import design_mass_kg, design_power_W
-from modsat_core.spec.requirements import landed_within, verdict
+from modsat_core.spec.requirements import judged, landed_within, verdict
 from modsat_core.training.diffsim import DiffsimRun, training_mission
 from modsat_core.training.diffsim_codesign import TOP_DRAWS, fixed_cells, satellites
 
@@ -298,7 +298,8 @@ class ParetoRun(DiffsimRun):
                 for c in ev.conditions:
                     eps = res[c.name].episodes
                     conds[c.name] = sum(bool(e["success"]) for e in eps) / len(eps)
-                    shares[c.name] = landed_within(eps, limit)
+                    if spec.requirements is None or judged(c, spec.requirements, spec.mission):
+                        shares[c.name] = landed_within(eps, limit)
             r["conditions"] = conds
             if spec.requirements is not None:
                 v = verdict(spec.requirements, r["mass_kg"], r["power_W"], shares)

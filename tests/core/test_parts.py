@@ -200,3 +200,14 @@ def test_a_policy_is_flagged_exactly_where_it_fails_a_condition_pd_lands():
     ]
     assert [f.name for f in flight_failures(conds)] == ["delay-1", "combined"]
     assert flight_failures([]) == []
+
+
+def test_a_condition_outside_the_required_slews_is_flown_but_not_judged():
+    from modsat_core.spec.evaluation import STANDARD_CONDITIONS
+    from modsat_core.spec.requirements import judged
+
+    req = Requirements(settling_time_s=20.0, slew_max_deg=90.0)
+    mission = Mission(slew_min_deg=30.0, slew_max_deg=90.0)
+    names = [n for n, c in STANDARD_CONDITIONS.items() if judged(c, req, mission)]
+    assert "large-slews" not in names and {"delay-1", "small-slews", "combined"} <= set(names)
+    assert judged(STANDARD_CONDITIONS["large-slews"], Requirements(settling_time_s=20.0, slew_max_deg=180.0), mission)

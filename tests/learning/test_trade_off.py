@@ -59,7 +59,7 @@ def test_each_price_has_its_own_distribution_over_every_part():
     run = ParetoRun(tiny_trade_off())
     assert run.logits.shape == (2, 8, 4)  # prices, cells, {empty, structure, small, big}
     grids, raw = run.draw(64, 1)
-    for g, r in zip(grids, raw, strict=True):
+    for g in grids:
         assert g[0, 0, 0] == g[0, 0, 1] == STRUCTURE
         assert set(np.unique(g)) <= {0, 1, 2, 3}
         if (g >= ACTUATOR).any():
@@ -88,9 +88,13 @@ def test_a_trade_off_run_returns_its_front_keeps_the_lightest_that_meets_and_res
     assert any(p["grid"] == kept for p in front)
     assert curve["kept"]["meets_requirements"] == bool(meeting)
     ev = json.loads(files["evaluation.json"])
-    assert ev["requirements"]["meets"] == all(
-        ev["requirements"]["landed_within_settling_time"][k] >= 0.5 for k in ("nominal", "delay-1", "weak-wheels")
-    ) and ev["requirements"]["mass_kg"] <= 20.0
+    assert (
+        ev["requirements"]["meets"]
+        == all(
+            ev["requirements"]["landed_within_settling_time"][k] >= 0.5 for k in ("nominal", "delay-1", "weak-wheels")
+        )
+        and ev["requirements"]["mass_kg"] <= 20.0
+    )
     ref = (curve["front_reference"]["mass_kg"], curve["front_reference"]["settling_s"])
     assert ref[1] == 24 / 12 and curve["front_hypervolume"] == hypervolume(
         np.asarray([[p["mass_kg"], p["median_settling_s"]] for p in front]), ref

@@ -577,6 +577,61 @@ function flightWarning(ev) {
     + " of the same slews. Train with randomise (docs/robustness.md) before flying it." : "";
 }
 
+// curve.json's trade-off (docs/requirements.md): the requirements, the front of flown designs over mass
+// and median settling time (a click on a point shows its design, figures, flight conditions and files).
+function tradeOffView(job, curve, spec) {
+  const req = (spec && spec.requirements) || null;
+  const front = curve.front, cands = Array.isArray(curve.selection) ? curve.selection : [];
+  const reqLine = req ? "Requirements: " + [
+    req.slew_max_deg != null ? `slews to ${req.slew_max_deg} deg` : null,
+    `settled within ${req.settling_time_s} s on ${Math.round(100 * req.success)} % of the slews under every flight condition`,
+    req.mass_budget_kg != null ? `at most ${req.mass_budget_kg} kg` : null,
+    req.power_budget_W != null ? `at most ${req.power_budget_W} W` : null,
+  ].filter(Boolean).join(", ") + "." : "No requirements stated: the front alone.";
+  const meeting = front.filter((p) => p.meets);
+  const lightest = meeting.length ? meeting.reduce((a, b) => (b.mass_kg < a.mass_kg ? b : a)) : null;
+  const verdict = lightest
+    ? `Lightest design meeting them: ${lightest.mass_kg.toFixed(2)} kg, median settling ${lightest.median_settling_s.toFixed(2)} s (kept).`
+    : (req ? "No front point meets the requirements; the reasons are listed with each point." : "");
+  const detail = el("div", { id: "front-point", class: "front-point-detail" },
+    el("p", { class: "hint", text: "Click a point of the front to see its design." }));
+  const chart = window.modsatCharts.frontChart(front, cands, {
+    massBudget: req ? req.mass_budget_kg : null,
+    settlingLimit: req ? req.settling_time_s : null,
+    onPick: (i) => showFrontPoint(detail, job, curve, i),
+  });
+  return [el("h3", { text: "Trade-off" }), el("p", { class: "hint", text: reqLine }),
+    el("p", { text: verdict }), el("div", { class: "curves" }, chart), detail];
+}
+
+function showFrontPoint(box, job, curve, i) {
+  const p = curve.front[i];
+  const units = Object.entries(p.wheel_units || {}).map(([k, n]) => `${n} x ${k}`).join(", ") || "none";
+  const figures = `Point ${i + 1} of ${curve.front.length}: ${p.mass_kg.toFixed(2)} kg, `
+    + `${p.power_W == null ? "power not stated" : p.power_W.toFixed(2) + " W"}, median settling `
+    + `${p.median_settling_s.toFixed(2)} s, ${p.modules} modules, wheel units: ${units}.`;
+  const conds = Object.entries(p.conditions || {});
+  const table = conds.length ? el("table", { class: "eval front-conditions" },
+    el("thead", {}, el("tr", {}, el("th", { text: "condition" }), el("th", { class: "num", text: "success" }))),
+    el("tbody", {}, el("tr", {}, el("th", { text: "nominal" }), el("td", { class: "num", text: fmt.pct(p.success) })),
+      ...conds.map(([k, v]) => el("tr", {}, el("th", { text: k }), el("td", { class: "num", text: fmt.pct(v) }))))) : null;
+  const design = new Blob([JSON.stringify({ grid: p.grid, mass_kg: p.mass_kg, wheel_units: p.wheel_units }, null, 1)],
+    { type: "application/json" });
+  const kept = curve.kept && JSON.stringify(curve.kept.grid) === JSON.stringify(p.grid);
+  const files = el("ul", { class: "downloads front-downloads" },
+    el("li", {}, el("a", { href: URL.createObjectURL(design), download: `modsat-job-${job.id}-front-${i + 1}-design.json`,
+      text: `front-${i + 1}-design.json` }), el("span", { class: "hint", text: " this point's design" })),
+    el("li", {}, el("a", { href: `/api/jobs/${job.id}/artifacts/policy.pt`, download: `modsat-job-${job.id}-policy.pt`,
+      text: "policy.pt" }), el("span", { class: "hint", text: " the run's controller: it flies every point of the front (design-conditioned)" })),
+    ...(kept ? [el("li", { class: "hint", text: "This is the kept design: its standalone exports are in the downloads below." })] : []));
+  box.replaceChildren(
+    el("div", { class: "design-pic" }, window.modsatCharts.designThumb(p.grid) || el("span"),
+      el("p", { class: "hint", text: figures })),
+    ...(p.meets === undefined ? [] : [el("p", { class: p.meets ? "" : "errors",
+      text: p.meets ? "Meets the requirements." : "Misses: " + (p.reasons || []).join("; ") })]),
+    ...(table ? [table] : []), files);
+}
+
 // verification.json (evaluation.basilisk): the same slews flown in modsat and in Basilisk.
 function verifyView(v) {
   const head = el("h3", { text: "Basilisk verification" });
@@ -665,9 +720,17 @@ async function renderFiles(job, files) {
     const r = await api(`/api/jobs/${job.id}/artifacts/verification.json`);
     vBox.replaceChildren(...(r.ok ? verifyView(r.body) : [el("p", { class: "errors", text: errorText(r) })]));
   }
+  const toBox = $("trade-off");
+  toBox.hidden = true;
+  toBox.replaceChildren();
   if (names.has("curve.json")) {
     const r = await api(`/api/jobs/${job.id}/artifacts/curve.json`);
     if (r.ok && r.body && Array.isArray(r.body.points)) state.curveFromFile = r.body.points;
+    if (r.ok && r.body && Array.isArray(r.body.front) && r.body.front.length) {
+      const s = names.has("spec.json") ? await api(`/api/jobs/${job.id}/artifacts/spec.json`) : null;
+      toBox.replaceChildren(...tradeOffView(job, r.body, s && s.ok ? s.body : null));
+      toBox.hidden = false;
+    }
   }
   drawCurves();
 

@@ -96,7 +96,7 @@ function lineChart(series, opts) {
   return svg;
 }
 
-// A voxel design (grid[x][y][z]: 0 empty, 1 structure, 2 actuator) drawn isometric as inline SVG.
+// A voxel design (grid[x][y][z]: 0 empty, 1 structure, 2 and above a wheel unit) drawn isometric as inline SVG.
 // Only the three faces turned to the viewer are drawn, back to front. Structure is translucent
 // glass and its faces between two structure cells are left out, so an actuator inside a full
 // cube still shows in its orange through one pane (the 3D view does the same).
@@ -111,7 +111,7 @@ function designThumb(grid, opts) {
   const at = (x, y, z) => (x < n && y < grid[x].length && z < grid[x][y].length ? grid[x][y][z] : 0);
   const cells = [];
   for (let x = 0; x < n; x++) for (let y = 0; y < grid[x].length; y++) for (let z = 0; z < grid[x][y].length; z++) {
-    if (grid[x][y][z]) cells.push([x, y, z, grid[x][y][z]]);
+    if (grid[x][y][z]) cells.push([x, y, z, Math.min(grid[x][y][z], 2)]);  // every wheel type draws as a unit
   }
   cells.sort((a, b) => (a[0] + a[1] + a[2]) - (b[0] + b[1] + b[2]) || a[2] - b[2]);
   const faces = [], all = [];
@@ -146,4 +146,64 @@ function designThumb(grid, opts) {
   return svg;
 }
 
-window.modsatCharts = { lineChart, niceTicks, designThumb };
+// The trade-off (curve.json's front and its candidates): mass (kg) against median settling (s), each
+// front point a button (data-index); the requirements' budget and time limit as dashed lines.
+// opts: {massBudget, settlingLimit, onPick(index)}.
+function frontChart(front, candidates, opts) {
+  const W = 460, H = 260, m = { l: 56, r: 12, t: 26, b: 44 };
+  const svg = svgEl("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart front-chart", role: "img",
+    "aria-label": "trade-off: mass against median settling time" });
+  svg.appendChild(svgEl("text", { x: m.l, y: 16, class: "chart-title" }, "Trade-off: mass against settling time"));
+  const all = [...candidates, ...front];
+  const xs = all.map((p) => p.mass_kg), ys = all.map((p) => p.median_settling_s);
+  if (Number.isFinite(opts.massBudget)) xs.push(opts.massBudget);
+  if (Number.isFinite(opts.settlingLimit)) ys.push(opts.settlingLimit);
+  let x0 = Math.min(...xs), x1 = Math.max(...xs), y0 = Math.min(0, ...ys), y1 = Math.max(...ys);
+  if (x1 <= x0) { x0 -= 1; x1 += 1; }
+  if (y1 <= y0) { y1 = y0 + 1; }
+  const xt = niceTicks(x0, x1, 5), yt = niceTicks(y0, y1, 4);
+  x0 = Math.min(x0, xt[0]); x1 = Math.max(x1, xt[xt.length - 1]); y1 = Math.max(y1, yt[yt.length - 1]);
+  const X = (x) => m.l + (x - x0) / (x1 - x0) * (W - m.l - m.r);
+  const Y = (y) => H - m.b - (y - y0) / (y1 - y0) * (H - m.t - m.b);
+  for (const v of yt) {
+    svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(v), y2: Y(v), class: "grid" }));
+    svg.appendChild(svgEl("text", { x: m.l - 6, y: Y(v) + 4, "text-anchor": "end", class: "tick" }, fmtTick(v)));
+  }
+  for (const v of xt) {
+    svg.appendChild(svgEl("text", { x: X(v), y: H - m.b + 16, "text-anchor": "middle", class: "tick" }, fmtTick(v)));
+  }
+  svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, class: "axis" }));
+  svg.appendChild(svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, class: "axis" }));
+  svg.appendChild(svgEl("text", { x: (m.l + W - m.r) / 2, y: H - 8, "text-anchor": "middle", class: "label" },
+    "total mass (kg)"));
+  svg.appendChild(svgEl("text", { x: 12, y: (m.t + H - m.b) / 2, "text-anchor": "middle", class: "label",
+    transform: `rotate(-90 12 ${(m.t + H - m.b) / 2})` }, "median settling (s)"));
+  if (Number.isFinite(opts.massBudget)) {
+    svg.appendChild(svgEl("line", { x1: X(opts.massBudget), x2: X(opts.massBudget), y1: m.t, y2: H - m.b,
+      class: "ref budget", stroke: "#b54", "stroke-dasharray": "6 4" }));
+  }
+  if (Number.isFinite(opts.settlingLimit)) {
+    svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(opts.settlingLimit), y2: Y(opts.settlingLimit),
+      class: "ref limit", stroke: "#b54", "stroke-dasharray": "6 4" }));
+  }
+  for (const p of candidates) {
+    svg.appendChild(svgEl("circle", { cx: X(p.mass_kg), cy: Y(p.median_settling_s), r: 3, fill: "#bab0ac",
+      class: "candidate" }));
+  }
+  const d = front.map((p, j) => `${j ? "L" : "M"}${X(p.mass_kg).toFixed(1)},${Y(p.median_settling_s).toFixed(1)}`);
+  svg.appendChild(svgEl("path", { d: d.join(""), fill: "none", stroke: "#4e79a7", "stroke-width": 1.5 }));
+  front.forEach((p, i) => {
+    const c = svgEl("circle", { cx: X(p.mass_kg), cy: Y(p.median_settling_s), r: 6, tabindex: 0, role: "button",
+      class: "front-point" + (p.meets ? " meets" : ""), "data-index": i,
+      fill: p.meets ? "#59a14f" : "#4e79a7", stroke: "#fff", "stroke-width": 1.5 });
+    c.appendChild(svgEl("title", {}, `${p.mass_kg.toFixed(2)} kg, ${p.median_settling_s.toFixed(2)} s`
+      + (p.meets ? ", meets the requirements" : "")));
+    const pick = () => opts.onPick && opts.onPick(i);
+    c.addEventListener("click", pick);
+    c.addEventListener("keydown", (e) => { if (e.key === "Enter" || e.key === " ") { e.preventDefault(); pick(); } });
+    svg.appendChild(c);
+  });
+  return svg;
+}
+
+window.modsatCharts = { lineChart, niceTicks, designThumb, frontChart };
