@@ -58,9 +58,10 @@ class Requirements(_Section):
 
 def judged(condition: Condition, req: Requirements, mission: Mission) -> bool:
     """Whether ``condition`` counts in the verdict: not when it flies slews outside the range the
-    requirements ask for (the mission's where they state none), such as `large-slews` for a satellite
-    required to slew to 90 deg. Such a condition is still flown and reported."""
-    lo = req.slew_min_deg if req.slew_min_deg is not None else mission.slew_min_deg
+    requirements ask for, such as `large-slews` for a satellite required to slew to 90 deg (the largest
+    is the mission's where they state none; the smallest 0, where they state none: a satellite that
+    must slew 90 deg must also make small slews). Such a condition is still flown and reported."""
+    lo = req.slew_min_deg if req.slew_min_deg is not None else 0.0
     hi = req.slew_max_deg if req.slew_max_deg is not None else mission.slew_max_deg
     c_lo = condition.slew_min_deg if condition.slew_min_deg is not None else mission.slew_min_deg
     c_hi = condition.slew_max_deg if condition.slew_max_deg is not None else mission.slew_max_deg
