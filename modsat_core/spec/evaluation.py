@@ -154,7 +154,10 @@ def resolve_conditions(items: list[Any]) -> list[Any]:
             out.append(STANDARD_CONDITIONS[item])
         else:
             out.append(item)
-    names = [c.name if isinstance(c, Condition) else (c or {}).get("name", "custom") for c in out]
+    # anything not an object is left to the field's validation (a 422 naming it, not a crash)
+    names = [
+        c.name if isinstance(c, Condition) else c.get("name", "custom") for c in out if isinstance(c, (Condition, dict))
+    ]
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
         raise ValueError(f"condition names must be unique; repeated: {', '.join(repeated)}")

@@ -185,11 +185,17 @@ def test_the_spec_names_standard_conditions_and_rejects_bad_ones():
         ([{"name": "nominal"}], "'nominal' names"),
         ([{"name": "x", "delay_steps": 11}], "delay_steps"),
         ([{"name": "x", "slew_min_deg": 40, "slew_max_deg": 30}], "must not exceed"),
+        # not objects: a message naming the item, not a crash (they were 500s at the API)
+        ([True], r"conditions\.0: Input should be an object"),
+        ([[1]], r"conditions\.0: Input should be an object"),
+        ([1.5], r"conditions\.0: Input should be an object"),
+        ([[None, None]], r"conditions\.0: Input should be an object"),
     ):
         d["evaluation"]["conditions"] = bad
         with pytest.raises(SpecError, match=words):
             parse_spec(d)
     assert not Randomise().active and Randomise(delay_steps=1).active
+    assert not Randomise(delay_steps=1, enabled=False).active  # a preset's randomisation turned off
 
 
 def test_randomised_rows_stay_inside_their_ranges():
