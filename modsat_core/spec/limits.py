@@ -165,7 +165,10 @@ def estimate(spec: JobSpec) -> Estimate:
             # A flight without a graph keeps one step's tensors a slew: at most what the window keeps
             # of an RK4 step, twice over for float64 (the validation slews of the kept design's
             # candidates, at most 1 + TOP_DRAWS = 4 of them).
-            flights = max(d.design_batch * d.design_slews, 4 * e.episodes)
+            # A trade-off draws at least 4 designs a price, and flies every price's candidates at the end.
+            prices = len(spec.objective.trade_off_prices_s_per_kg)
+            draws = max(d.design_batch, 4 * prices)
+            flights = max(draws * d.design_slews, 4 * max(1, prices) * e.episodes)
             design = 2 * per_substep * flights
             if d.design_gradient == "relaxed":  # a whole episode's graph, float64
                 relaxed = m.episode_steps * (2 * d.design_slews * per_slew_step + RELAXED_BYTES_PER_STEP)
