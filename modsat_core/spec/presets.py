@@ -131,7 +131,7 @@ def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
     )
 
 
-def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float) -> JobSpec:
+def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float, episode_steps: int = 360) -> JobSpec:
     """A trade-off preset (docs/requirements.md): a payload plate (the k = 0 layer, ``payload_kg`` a cell),
     0.2 kg structure modules, wheel units of two real CubeSat wheels, `requirements`, four mass prices,
     trained under the flight conditions."""
@@ -150,7 +150,7 @@ def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float) -> J
                 "slew_min_deg": 30.0,
                 "slew_max_deg": 90.0,
                 "tolerance_deg": 0.25,
-                "episode_steps": 360,
+                "episode_steps": episode_steps,
                 "reward": _HOLD_REWARD,
             },
             "requirements": requirements,
@@ -238,6 +238,19 @@ PRESETS: dict[str, JobSpec] = {
             "mass_budget_kg": 9.0,
         },
         payload_kg=0.5,
+    ),
+    "trade-off-5x5x5": _trade_off(
+        5,
+        240,
+        {
+            "slew_max_deg": 90.0,
+            "tolerance_deg": 0.25,
+            "settling_time_s": 25.0,
+            "success": 0.99,
+            "mass_budget_kg": 20.0,
+        },
+        payload_kg=0.5,
+        episode_steps=480,
     ),
     "cpu-3x3x3": JobSpec.model_validate(
         {
