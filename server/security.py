@@ -15,6 +15,12 @@ service would take such a request for the user's own. So, for HTTP and websocket
   same rules, web/origin.py) must come from a page on an allowed host.
 
 Submissions must also be ``application/json`` (415), see routes_jobs.py.
+
+No other site may frame the page (clickjacking: the job page's Cancel is one click away): every HTTP
+answer carries ``X-Frame-Options: DENY`` and ``Content-Security-Policy: frame-ancestors 'none'``,
+except viser's client (``/viser-client/``), which the page itself frames: ``SAMEORIGIN`` and
+``frame-ancestors 'self'``. A request with more than one ``Host`` or ``Origin`` header is refused
+(400), as the viewer's guard does: which one a proxy or the check would read is not to be guessed.
 """
 
 from __future__ import annotations
@@ -25,6 +31,9 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from web.origin import host_allowed, origin_allowed
 
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+#: Framing headers of every answer, and of viser's client (the page frames it; nobody else may).
+NO_FRAMING = [(b"x-frame-options", b"DENY"), (b"content-security-policy", b"frame-ancestors 'none'")]
+SELF_FRAMING = [(b"x-frame-options", b"SAMEORIGIN"), (b"content-security-policy", b"frame-ancestors 'self'")]
 
 
 class CrossSiteGuard:
@@ -42,6 +51,11 @@ class CrossSiteGuard:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] not in ("http", "websocket"):
             await self.app(scope, receive, send)
+            return
+        names = [k.decode("latin-1").lower() for k, _ in scope["headers"]]
+        repeated = sorted({n for n in ("host", "origin") if names.count(n) > 1})
+        if repeated:
+            await self._reject(scope, send, 400, f"more than one {' and '.join(repeated)} header")
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
         host = headers.get("host", "")
@@ -76,6 +90,16 @@ class CrossSiteGuard:
                     ),
                 )
                 return
+        if scope["type"] == "http":
+            framing = SELF_FRAMING if scope.get("path", "").startswith("/viser-client") else NO_FRAMING
+
+            async def framed(message):
+                if message["type"] == "http.response.start":
+                    message = {**message, "headers": [*message.get("headers", []), *framing]}
+                await send(message)
+
+            await self.app(scope, receive, framed)
+            return
         await self.app(scope, receive, send)
 
 

@@ -225,6 +225,28 @@ PRESETS: dict[str, JobSpec] = {
     # Co-design by the first-order learner on a priced objective (docs/diffsim.md, "Co-design").
     "diffsim-3x3x3": _diffsim_codesign(3, 240),
     "diffsim-5x5x5": _diffsim_codesign(5, 240),
+    "cpu-3x3x3": JobSpec.model_validate(
+        {
+            "name": "cpu-3x3x3",
+            "algorithm": "td3-codesign",
+            "design": {"grid_size": 3, "repair": True},
+            "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
+            "mission": {"reward": _HOLD_REWARD},
+            "training": {
+                **_CPU_TRAINING,
+                **_CODESIGN_HOLD,
+                "total_env_steps": 80_000,
+                "num_envs": 16,
+                "buffer_size": 200_000,
+                "learning_starts": 5_000,
+                "eval_every_steps": 5_000,
+                "eval_episodes": 32,
+                "select_top_k": 4,
+                "checkpoint_every_steps": 20_000,
+                "design_learning_starts": 30_000,
+            },
+        }
+    ),
     # The trade-off over mass and settling time, with real parts and an engineer's requirements
     # (docs/requirements.md has the catalog, the requirements and what the presets land).
     "trade-off-3x3x3": _trade_off(
@@ -251,28 +273,6 @@ PRESETS: dict[str, JobSpec] = {
         },
         payload_kg=0.5,
         episode_steps=480,
-    ),
-    "cpu-3x3x3": JobSpec.model_validate(
-        {
-            "name": "cpu-3x3x3",
-            "algorithm": "td3-codesign",
-            "design": {"grid_size": 3, "repair": True},
-            "modules": {"torque_scale_Nm": PAPER_TAU_3X3X3_NM, "actuator_model": "reaction-wheel"},
-            "mission": {"reward": _HOLD_REWARD},
-            "training": {
-                **_CPU_TRAINING,
-                **_CODESIGN_HOLD,
-                "total_env_steps": 80_000,
-                "num_envs": 16,
-                "buffer_size": 200_000,
-                "learning_starts": 5_000,
-                "eval_every_steps": 5_000,
-                "eval_episodes": 32,
-                "select_top_k": 4,
-                "checkpoint_every_steps": 20_000,
-                "design_learning_starts": 30_000,
-            },
-        }
     ),
 }
 

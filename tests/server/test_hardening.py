@@ -75,6 +75,32 @@ def test_foreign_host_header_is_refused_for_reads_too(api):
     assert _raw(api, "GET", "/api/health", host="a:b:c").status_code == 400
 
 
+def test_no_other_site_may_frame_the_page_and_repeated_host_or_origin_is_refused(api):
+    """Clickjacking: the page, the API and the downloads answer DENY; viser's client, which the page
+    frames itself, SAMEORIGIN. Two Origin (or Host) headers: which would a check read? Refused."""
+    for path in ("/", "/api/health", "/api/jobs"):
+        r = api.client.get(path)
+        assert r.headers["x-frame-options"] == "DENY", path
+        assert r.headers["content-security-policy"] == "frame-ancestors 'none'", path
+    r = api.client.get("/viser-client/")
+    assert r.headers["x-frame-options"] == "SAMEORIGIN"
+    assert r.headers["content-security-policy"] == "frame-ancestors 'self'"
+    two = [("origin", api.base), ("origin", EVIL), ("content-type", "application/json")]
+    r = api.client.request("POST", "/api/jobs", content=json.dumps(TINY).encode(), headers=two)
+    assert r.status_code == 400 and "more than one origin header" in r.json()["detail"]
+    import socket  # httpx will not send two Host headers: a raw request does
+
+    with socket.create_connection(("127.0.0.1", api.port), timeout=10) as sock:
+        sock.sendall(
+            f"GET /api/health HTTP/1.1\r\nHost: localhost:{api.port}\r\nHost: evil.example\r\n"
+            "Connection: close\r\n\r\n".encode()
+        )
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+    assert answer.startswith(b"HTTP/1.1 400"), answer[:300]  # the HTTP parser refuses it before the guard
+
+
 def test_allowed_hosts_and_origins_are_settings(start_server, sqlite_url):
     s = start_server(
         sqlite_url,
@@ -237,6 +263,8 @@ def test_openapi_declares_the_bearer_token_only_when_one_is_set(api, start_serve
         "diffsim-3x3x3",
         "diffsim-5x5x5",
         "cpu-3x3x3",
+        "trade-off-3x3x3",
+        "trade-off-5x5x5",
     ]
     s = start_server(sqlite_url, env={"MODSAT_API_TOKEN": "s3cret"})
     closed = s.client.get("/api/openapi.json").json()
