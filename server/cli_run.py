@@ -41,11 +41,25 @@ def _cmd_schema(args: argparse.Namespace) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from modsat_core.spec.jobspec import parse_spec
+    from modsat_core.spec.jobspec import SpecError, parse_spec
     from modsat_core.spec.limits import estimate
 
     with open(args.spec, "rb") as fh:
-        spec = parse_spec(fh.read())
+        raw = fh.read()
+    try:
+        body = json.loads(raw)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:  # said as text, not as a bytes repr
+        where = f" at line {exc.lineno} column {exc.colno}" if isinstance(exc, json.JSONDecodeError) else ""
+        raise SpecError([f"(spec): {args.spec} is not valid JSON: {getattr(exc, 'msg', exc)}{where}"]) from None
+    if isinstance(body, dict) and "preset" in body:  # the REST API's form: {"preset": NAME, "overrides": {...}}
+        from server.submit import Invalid, spec_from_body
+
+        try:
+            spec = spec_from_body(body)
+        except Invalid as exc:
+            raise SpecError([str(e["msg"]) for e in exc.errors]) from None
+    else:
+        spec = parse_spec(raw)
     check_limits(spec, "check")
     est = estimate(spec)
     print(

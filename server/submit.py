@@ -156,6 +156,18 @@ def spec_from_body(body: Any) -> JobSpec:
     except (ValueError, TypeError, RecursionError) as exc:  # a validator bug must not become a 500
         log.exception("spec validation raised unexpectedly")
         raise Invalid([_error([], f"body: the spec could not be validated: {exc}")]) from None
+    if not prefix and "algorithm" not in body:
+        raise Invalid(
+            [
+                _error(
+                    ["algorithm"],
+                    'algorithm: a submission names a preset ({"preset": "quick"}, `GET /api/presets` lists them) '
+                    "or the algorithm of a whole spec; without either it would be the default 200,000-step "
+                    "td3-codesign job",
+                    "missing",
+                )
+            ]
+        )
     if spec.name is not None and "\x00" in spec.name:  # stored as a text column: PostgreSQL refuses NUL
         raise Invalid(
             [_error([*prefix, "name"], "name: must not contain the NUL character (\\u0000)", "string_pattern_mismatch")]

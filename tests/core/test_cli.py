@@ -49,6 +49,18 @@ def test_check_reports_readable_errors(tmp_path):
     assert modsat("check", str(good)).returncode == 0
     r = modsat("check", str(tmp_path / "missing.json"))
     assert r.returncode == 2 and "No such file" in r.stderr
+    # the REST API's body form, as `POST /api/jobs` takes it
+    body = tmp_path / "body.json"
+    body.write_text(json.dumps({"preset": "quick", "overrides": {"seed": 3}}))
+    assert modsat("check", str(body)).returncode == 0
+    body.write_text(json.dumps({"preset": "quick", "overrides": {"seed": -1}}))
+    r = modsat("check", str(body))
+    assert r.returncode == 2 and "seed: -1 is out of range" in r.stderr
+    broken = tmp_path / "broken.json"
+    broken.write_bytes(b'{"seed": 3,')
+    r = modsat("check", str(broken))
+    assert r.returncode == 2 and "is not valid JSON" in r.stderr and "line 1 column 12" in r.stderr
+    assert "b'" not in r.stderr and "Traceback" not in r.stderr
 
 
 def test_bad_flags_get_a_message_not_a_traceback():

@@ -54,6 +54,9 @@ def test_submit_whole_spec(api):
         ({"preset": "quick-td3", "overrides": [1]}, "overrides", "expected an object"),
         ({"preset": "quick-td3", "seed": 3}, "seed", "inside 'overrides'"),
         ([1, 2], "body", "expected a JSON object"),
+        # neither a preset nor an algorithm: not the default 200,000-step td3-codesign job
+        ({}, "algorithm", "names a preset"),
+        ({"name": "x", "seed": 2}, "algorithm", "names a preset"),
     ],
 )
 def test_invalid_spec_is_422_naming_the_field(api, body, field, words):
