@@ -164,6 +164,11 @@ def test_submit_quick_and_watch_it_finish(service, new_page):
     assert rows.count() == 1 + len(conditions) and len(conditions) >= 1
     late = page.locator("#conditions tr[data-condition='delay-1']")
     assert "delay_steps 1" in late.text_content() and late.locator("td").count() == 7
+    # every result column inside the panel at 1280 px: results first, the long "what changes" wrapped
+    combined = page.locator("#conditions table")
+    assert combined.evaluate("t => t.scrollWidth <= document.getElementById('evaluation').clientWidth"), (
+        "the flight-conditions table fits its panel"
+    )
     assert re.search(r"Design: \d+ modules, \d+ actuators?\b", table), table
     assert not re.search(r"\b1 actuators\b", table), table
     names = page.locator("#downloads a").all_text_contents()

@@ -551,15 +551,16 @@ function conditionsTable(ev) {
   const what = (c) => Object.entries(c.changes || {}).map(([k, v]) => `${k} ${v}`).join(", ") || "the evaluation's slews";
   const cells = (s) => (s ? [fmt.pct(s.success_rate), fmt.int(s.safety_violations), fmt.num(2)(s.median_settling_time_s)]
     : ["-", "-", "-"]).map((t) => el("td", { class: "num", text: t }));
-  const head = ["condition", "what changes", "policy success", "violations", "settling (s)",
-    "PD success", "violations", "settling (s)"];
+  // results first; what a condition changes last, wrapped (the combined row's list is long)
+  const head = ["condition", "policy success", "violations", "settling (s)",
+    "PD success", "violations", "settling (s)", "what changes"];
   return el("div", { id: "conditions" },
     el("h3", { text: "Flight conditions (same slews, policy and PD)" }),
     el("table", { class: "eval conditions" },
-      el("thead", {}, el("tr", {}, ...head.map((t, i) => el("th", { class: i > 1 ? "num" : "", text: t })))),
+      el("thead", {}, el("tr", {}, ...head.map((t, i) => el("th", { class: i > 0 && i < 7 ? "num" : "", text: t })))),
       el("tbody", {}, ...rows.map((c) => el("tr", { "data-condition": c.name,
         class: failed.has(c.name) ? "failed" : "" }, el("th", { text: c.name }),
-        el("td", { class: "hint", text: what(c) }), ...cells(c.policy), ...cells(c.pd_baseline))))));
+        ...cells(c.policy), ...cells(c.pd_baseline), el("td", { class: "hint changes", text: what(c) }))))));
 }
 
 // evaluation.json's flight_failures: the conditions where PD lands and the policy does not.
