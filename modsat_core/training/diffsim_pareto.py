@@ -15,9 +15,13 @@ conditions), so that it flies the whole range of masses and wheel sets the front
 pulls its distribution to heavy, well-actuated satellites, a dear one to the lightest that still land.
 
 At the end the candidates (each distribution's mode and its best draws) fly the validation slews
-(``evaluation.episodes``, the mission's physics, float64). Their non-dominated set over (mass, median
-settling time) among those that land every slew (moocore) are the front; each front point then flies every
-flight condition of ``evaluation.conditions`` and gets the requirements' verdict. The run's kept design is
+(``evaluation.episodes``, the mission's physics, float64). The front is their non-dominated set over
+(mass, median settling time) among those that land every slew and are flight-ready (moocore): the
+non-dominated points fly every flight condition of ``evaluation.conditions``; a point that lands less than
+:data:`FLIGHT_READY_SHARE` of the slews under one (of those the requirements judge) is dropped and the
+front taken again, until every point of it is flight-ready (where none is, the nominal front, each point
+saying so). Each point carries its success per condition, ``flight_ready`` and the requirements' verdict;
+the candidates dropped stay in ``selection`` with theirs. The run's kept design is
 the lightest front point that meets the requirements, else the front point of least objective at the
 middle price (the final evaluation says then that no front point meets them, with every reason).
 """
@@ -44,6 +48,9 @@ from modsat_core.training.diffsim_codesign import TOP_DRAWS, fixed_cells, satell
 
 #: Fewest draws a distribution takes at a design update.
 MIN_DRAWS = 4
+#: A front point is flight-ready when it lands at least this share of the slews nominally and under each
+#: flight condition (those the requirements judge, where there are requirements).
+FLIGHT_READY_SHARE = 0.99
 
 
 def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[list[dict]]:
@@ -273,40 +280,64 @@ class ParetoRun(DiffsimRun):
             r["_episodes"] = episodes
             records.append(r)
         landed = [r for r in records if r["success"] >= 1.0] or records
-        pts = np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in landed])
-        front = sorted(
-            [r for r, keep in zip(landed, nondominated(pts), strict=True) if keep], key=lambda r: r["mass_kg"]
-        )
-        limit = spec.requirements.settling_time_s if spec.requirements is not None else math.inf
-        for r in front:
-            grid = np.asarray(r["grid"], dtype=np.int64)
-            shares = {"nominal": landed_within(r["_episodes"], limit)}
-            conds: dict[str, float] = {}
-            if ev.conditions:
-                design = Design.from_grid(grid, spec.modules)
-                with torch.no_grad():
-                    res = monte_carlo_conditions(
-                        design,
-                        controller_for(pol, grid, spec),
-                        spec.mission,
-                        spec.modules,
-                        ev.conditions,
-                        episodes=ev.episodes,
-                        seed=ev.seed,
-                        dtype=torch.float64,
-                    )
-                for c in ev.conditions:
-                    eps = res[c.name].episodes
-                    conds[c.name] = sum(bool(e["success"]) for e in eps) / len(eps)
-                    if spec.requirements is None or judged(c, spec.requirements, spec.mission):
-                        shares[c.name] = landed_within(eps, limit)
-            r["conditions"] = conds
-            if spec.requirements is not None:
-                v = verdict(spec.requirements, r["mass_kg"], r["power_W"], shares)
-                r["meets"], r["reasons"] = v["meets"], v["reasons"]
+        # The front of flight-ready designs: fly the non-dominated set's points under every condition, drop
+        # those that are not flight-ready, and take the front again, until every point of it is.
+        pool = list(landed)
+        while True:
+            pts = np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in pool])
+            front = sorted([r for r, k in zip(pool, nondominated(pts), strict=True) if k], key=lambda r: r["mass_kg"])
+            for r in front:
+                if "conditions" not in r:
+                    self.fly_conditions(r, pol)
+            unready = [r for r in front if not r["flight_ready"]]
+            if not unready:
+                break
+            pool = [r for r in pool if r.get("flight_ready") is not False]
+            if not pool:  # no candidate is flight-ready: the nominal front, each point saying so
+                pts = np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in landed])
+                keep = nondominated(pts)
+                front = sorted([r for r, k in zip(landed, keep, strict=True) if k], key=lambda r: r["mass_kg"])
+                for r in front:
+                    if "conditions" not in r:
+                        self.fly_conditions(r, pol)
+                break
         for r in records:
             r.pop("_episodes")
         return records, front
+
+    def fly_conditions(self, r: dict[str, Any], pol: torch.nn.Module) -> None:
+        """A candidate's flight under every condition of ``evaluation.conditions`` (success per
+        condition), whether it is flight-ready (at least :data:`FLIGHT_READY_SHARE` under each judged
+        one) and its requirements' verdict; written into the record ``r``."""
+        spec, ev = self.spec, self.spec.evaluation
+        limit = spec.requirements.settling_time_s if spec.requirements is not None else math.inf
+        grid = np.asarray(r["grid"], dtype=np.int64)
+        shares = {"nominal": landed_within(r["_episodes"], limit)}
+        conds: dict[str, float] = {}
+        ready = r["success"] >= FLIGHT_READY_SHARE
+        if ev.conditions:
+            design = Design.from_grid(grid, spec.modules)
+            with torch.no_grad():
+                res = monte_carlo_conditions(
+                    design,
+                    controller_for(pol, grid, spec),
+                    spec.mission,
+                    spec.modules,
+                    ev.conditions,
+                    episodes=ev.episodes,
+                    seed=ev.seed,
+                    dtype=torch.float64,
+                )
+            for c in ev.conditions:
+                eps = res[c.name].episodes
+                conds[c.name] = sum(bool(e["success"]) for e in eps) / len(eps)
+                if spec.requirements is None or judged(c, spec.requirements, spec.mission):
+                    shares[c.name] = landed_within(eps, limit)
+                    ready = ready and conds[c.name] >= FLIGHT_READY_SHARE
+        r["conditions"], r["flight_ready"] = conds, bool(ready)
+        if spec.requirements is not None:
+            v = verdict(spec.requirements, r["mass_kg"], r["power_W"], shares)
+            r["meets"], r["reasons"] = v["meets"], v["reasons"]
 
     def chosen(self) -> tuple[torch.nn.Module, np.ndarray, dict]:
         """The controller at the end of training and the kept design (the module docstring)."""

@@ -73,10 +73,13 @@ def test_a_trade_off_run_returns_its_front_keeps_the_lightest_that_meets_and_res
     curve = json.loads(files["curve.json"])
     front, selection = curve["front"], curve["selection"]
     assert front and len(curve["designs"]) == 3 and len(curve["designs"][0]["prices"]) == 2
-    # the front is the non-dominated set, over (mass, median settling), of the candidates that land every slew
+    # the front is the non-dominated set, over (mass, median settling), of the candidates that land every
+    # slew and are flight-ready (where none is: of those that land, each point saying it is not)
     landed = [s for s in selection if s["success"] >= 1.0] or selection
-    pts = np.asarray([[s["mass_kg"], s["median_settling_s"]] for s in landed])
-    want = sorted(s["mass_kg"] for s, k in zip(landed, nondominated(pts), strict=True) if k)
+    ready = all(p["flight_ready"] for p in front)
+    pool = [s for s in landed if s.get("flight_ready") is not False] if ready else landed
+    pts = np.asarray([[s["mass_kg"], s["median_settling_s"]] for s in pool])
+    want = sorted(s["mass_kg"] for s, k in zip(pool, nondominated(pts), strict=True) if k)
     assert [p["mass_kg"] for p in front] == want
     for p in front:  # each point flew every condition and got a verdict
         assert set(p["conditions"]) == {"delay-1", "weak-wheels"} and isinstance(p["meets"], bool)
