@@ -219,7 +219,7 @@ def _print_evaluation(summary: dict, stream) -> None:
         for f in s.flight_failures:
             print(
                 f"NOT FLIGHT-READY under {f.name}: the policy lands {100 * f.policy_success:.0f}% of the slews, "
-                f"PD {100 * f.pd_success:.0f}% (docs/robustness.md; train with `randomise`)",
+                f"PD {100 * f.pd_success:.0f}% (docs/robustness.md)",
                 file=stream,
             )
 

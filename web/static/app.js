@@ -575,7 +575,7 @@ function flightWarning(ev) {
   box.hidden = !failed.length;
   box.textContent = failed.length ? "Not flight-ready: this policy fails " + failed.map((f) =>
     `${f.name} (${fmt.pct(f.policy_success)}; PD ${fmt.pct(f.pd_success)})`).join(", ")
-    + " of the same slews. Train with randomise (docs/robustness.md) before flying it." : "";
+    + " of the same slews: not ready to fly under those conditions (docs/robustness.md)." : "";
 }
 
 // curve.json's trade-off (docs/requirements.md): the requirements, the front of flown designs over mass
