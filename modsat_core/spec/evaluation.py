@@ -23,6 +23,7 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
+from modsat_core.spec.parts import resolve_named
 from modsat_core.spec.sections import _Section
 
 _NAME = re.compile(r"^[a-z0-9][a-z0-9-]{0,39}$")
@@ -145,23 +146,8 @@ FLIGHT_READY: dict[str, Any] = {
 
 def resolve_conditions(items: list[Any]) -> list[Any]:
     """A list of conditions where a string names a standard one (``"delay-1"``); unknown names and
-    repeated names are errors that list what exists."""
-    out: list[Any] = []
-    for item in items:
-        if isinstance(item, str):
-            if item not in STANDARD_CONDITIONS:
-                raise ValueError(f"unknown condition {item!r}; standard ones: {', '.join(STANDARD_CONDITIONS)}")
-            out.append(STANDARD_CONDITIONS[item])
-        else:
-            out.append(item)
-    # anything not an object is left to the field's validation (a 422 naming it, not a crash)
-    names = [
-        c.name if isinstance(c, Condition) else c.get("name", "custom") for c in out if isinstance(c, (Condition, dict))
-    ]
-    repeated = sorted({n for n in names if names.count(n) > 1})
-    if repeated:
-        raise ValueError(f"condition names must be unique; repeated: {', '.join(repeated)}")
-    return out
+    repeated names are errors that list what exists (:func:`~modsat_core.spec.parts.resolve_named`)."""
+    return resolve_named(items, STANDARD_CONDITIONS, "condition")
 
 
 class Randomise(_Section):

@@ -88,22 +88,28 @@ WHEEL_LIBRARY: dict[str, WheelType] = {
 }
 
 
-def resolve_wheels(items: list[Any]) -> list[Any]:
-    """A catalog's wheel list where a string names a library wheel (``"bct-rwp015"``); unknown and
-    repeated names are errors that list what exists."""
+def resolve_named(items: list[Any], library: dict[str, Any], kind: str) -> list[Any]:
+    """``items`` where a string names an entry of ``library`` (a standard condition, a library wheel):
+    unknown names, and names repeated among the entries and the objects, are errors that say what
+    exists. Anything else is left to the field's own validation."""
     out: list[Any] = []
     for item in items:
         if isinstance(item, str):
-            if item not in WHEEL_LIBRARY:
-                raise ValueError(f"unknown wheel {item[:60]!r}; the library has: {', '.join(WHEEL_LIBRARY)}")
-            out.append(WHEEL_LIBRARY[item])
+            if item not in library:
+                raise ValueError(f"unknown {kind} {item[:60]!r}; known: {', '.join(library)}")
+            out.append(library[item])
         else:
             out.append(item)
-    names = [w.name if isinstance(w, WheelType) else (w.get("name") if isinstance(w, dict) else None) for w in out]
+    names = [getattr(c, "name", None) if not isinstance(c, dict) else c.get("name", "custom") for c in out]
     repeated = sorted({str(n) for n in names if n is not None and names.count(n) > 1})
     if repeated:
-        raise ValueError(f"wheel names must be unique; repeated: {', '.join(repeated)}")
+        raise ValueError(f"{kind} names must be unique; repeated: {', '.join(repeated)}")
     return out
+
+
+def resolve_wheels(items: list[Any]) -> list[Any]:
+    """A catalog's wheel list where a string names a library wheel (``"bct-rwp015"``)."""
+    return resolve_named(items, WHEEL_LIBRARY, "wheel")
 
 
 #: A cell [i, j, k] (a list: a spec is validated strictly, and JSON has no tuples).

@@ -91,8 +91,20 @@ _QUICK_MISSION = {
 DIFFSIM_CODESIGN_TAU_NM = {3: 0.05, 5: 0.2}
 
 
-def _diffsim_codesign(n: int, updates: int) -> JobSpec:
+def _first_order_budget(updates: int) -> dict:
+    """The training section of a first-order co-design preset: ``updates`` updates of 256 slews x 32
+    control steps, the curve and a checkpoint every quarter."""
     step = 256 * 32
+    return {
+        "total_env_steps": updates * step,
+        "eval_every_steps": updates // 4 * step,
+        "eval_episodes": 16,
+        "checkpoint_every_steps": updates // 4 * step,
+        "device": "cpu",
+    }
+
+
+def _diffsim_codesign(n: int, updates: int) -> JobSpec:
     return JobSpec.model_validate(
         {
             "name": f"diffsim-{n}x{n}x{n}",
@@ -106,13 +118,7 @@ def _diffsim_codesign(n: int, updates: int) -> JobSpec:
                 "wheel_price_s": 0.5,
                 "payload_cells": [[i, j, 0] for i in range(n) for j in range(n)],
             },
-            "training": {
-                "total_env_steps": updates * step,
-                "eval_every_steps": updates // 4 * step,
-                "eval_episodes": 16,
-                "checkpoint_every_steps": updates // 4 * step,
-                "device": "cpu",
-            },
+            "training": _first_order_budget(updates),
         }
     )
 
@@ -135,7 +141,6 @@ def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float, epis
     """A trade-off preset (docs/requirements.md): a payload plate (the k = 0 layer, ``payload_kg`` a cell),
     0.2 kg structure modules, wheel units of two real CubeSat wheels, `requirements`, four mass prices,
     trained under the flight conditions."""
-    step = 256 * 32
     return JobSpec.model_validate(
         {
             "name": f"trade-off-{n}x{n}x{n}",
@@ -156,13 +161,7 @@ def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float, epis
             "requirements": requirements,
             "objective": {"trade_off_prices_s_per_kg": [0.1, 0.3, 1.0, 3.0]},
             "randomise": FLIGHT_READY,
-            "training": {
-                "total_env_steps": updates * step,
-                "eval_every_steps": updates // 4 * step,
-                "eval_episodes": 16,
-                "checkpoint_every_steps": updates // 4 * step,
-                "device": "cpu",
-            },
+            "training": _first_order_budget(updates),
         }
     )
 

@@ -139,6 +139,67 @@ def score_designs(
     return out
 
 
+def draw_grids(
+    logits: Tensor, M: int, rng: np.random.Generator, fixed: np.ndarray, types: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``M`` satellites from per-cell type ``logits`` (N^3, T) and the raw grids they were drawn as."""
+    N = fixed.shape[0]
+    p = torch.softmax(logits.detach(), dim=-1).numpy()
+    u = rng.random((M, N**3, 1))
+    raw = (u > np.cumsum(p, axis=-1)[None, :, :-1]).sum(-1).reshape(M, N, N, N)
+    raw = np.where(fixed, types, raw)
+    return satellites(raw, fixed, types), raw
+
+
+def mode_grid(logits: Tensor, fixed: np.ndarray, types: np.ndarray) -> np.ndarray:
+    """The satellite of each cell's most probable type."""
+    N = fixed.shape[0]
+    raw = torch.softmax(logits.detach(), dim=-1).numpy().argmax(-1).reshape(1, N, N, N)
+    return satellites(raw, fixed, types)[0]
+
+
+def grid_log_prob(logits: Tensor, raw: np.ndarray, fixed: np.ndarray) -> Tensor:
+    """(M,) log-probability of each raw grid under ``logits`` (N^3, T), the fixed cells excluded."""
+    logp = torch.log_softmax(logits, dim=-1)
+    idx = torch.as_tensor(raw.reshape(len(raw), -1))
+    free = torch.as_tensor(~fixed.reshape(-1), dtype=torch.float64)
+    return (logp.gather(1, idx.T).T * free).sum(-1)
+
+
+def design_state(run: Any, best: Any) -> dict:
+    """A design learner's checkpoint: its logits, optimiser, draws' stream, records, best draws (as
+    given, grids as lists), the designs training flies and the curve's design."""
+    return {
+        "logits": run.logits.detach().clone(),
+        "design_opt": run.design_opt.state_dict(),
+        "design_rng": run.design_rng.bit_generator.state,
+        "records": copy.deepcopy(run.records),
+        "best": best,
+        "pool": [d.grid.tolist() for d in run.pool],
+        "active": list(run.active),
+        "grid": run.grid.tolist(),
+    }
+
+
+def load_design_state(run: Any, c: dict) -> None:
+    """:func:`design_state` back into ``run`` (its best draws and its grid are the caller's)."""
+    with torch.no_grad():
+        run.logits.copy_(c["logits"])
+    run.design_opt.load_state_dict(c["design_opt"])
+    run.design_rng.bit_generator.state = c["design_rng"]
+    run.records = list(c["records"])
+    run.pool = [Design.from_grid(np.asarray(g, dtype=np.int64), run.spec.modules) for g in c["pool"]]
+    run.active = (int(c["active"][0]), int(c["active"][1]))
+
+
+def best_from_state(best: list[dict]) -> list[dict]:
+    return [{"grid": np.asarray(b["grid"], dtype=np.int64), "objective_s": b["objective_s"]} for b in best]
+
+
+def best_to_state(best: list[dict]) -> list[dict]:
+    return [{"grid": b["grid"].tolist(), "objective_s": b["objective_s"]} for b in best]
+
+
 class DiffsimCodesignRun(DiffsimRun):
     """One `diffsim-codesign` run (see the module docstring)."""
 
@@ -171,24 +232,14 @@ class DiffsimCodesignRun(DiffsimRun):
 
     def draw(self, M: int) -> tuple[np.ndarray, np.ndarray]:
         """``M`` satellites from the distribution and the raw grids they were drawn as."""
-        N = self.spec.design.grid_size
-        p = self.probabilities()
-        u = self.design_rng.random((M, N**3, 1))
-        raw = (u > np.cumsum(p, axis=-1)[None, :, :-1]).sum(-1).reshape(M, N, N, N)
-        raw = np.where(self.fixed, self.fixed_types, raw)
-        return satellites(raw, self.fixed, self.fixed_types), raw
+        return draw_grids(self.logits, M, self.design_rng, self.fixed, self.fixed_types)
 
     def mode(self) -> np.ndarray:
-        N = self.spec.design.grid_size
-        raw = self.probabilities().argmax(-1).reshape(1, N, N, N)
-        return satellites(raw, self.fixed, self.fixed_types)[0]
+        return mode_grid(self.logits, self.fixed, self.fixed_types)
 
     def log_prob(self, raw: np.ndarray) -> torch.Tensor:
         """(M,) log-probability of each raw grid under the logits (the fixed cells excluded)."""
-        logp = torch.log_softmax(self.logits, dim=-1)
-        idx = torch.as_tensor(raw.reshape(len(raw), -1))
-        free = torch.as_tensor(~self.fixed.reshape(-1), dtype=torch.float64)
-        return (logp.gather(1, idx.T).T * free).sum(-1)
+        return grid_log_prob(self.logits, raw, self.fixed)
 
     # ------------------------------------------------------------------ scoring
     def score(self, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[float]:
@@ -316,29 +367,12 @@ class DiffsimCodesignRun(DiffsimRun):
     # ------------------------------------------------------------------ checkpoint
     def state_dict(self) -> dict:
         d = super().state_dict()
-        d["codesign"] = {
-            "logits": self.logits.detach().clone(),
-            "design_opt": self.design_opt.state_dict(),
-            "design_rng": self.design_rng.bit_generator.state,
-            "records": copy.deepcopy(self.records),
-            "best": [{"grid": b["grid"].tolist(), "objective_s": b["objective_s"]} for b in self.best],
-            "pool": [d.grid.tolist() for d in self.pool],
-            "active": list(self.active),
-            "grid": self.grid.tolist(),
-        }
+        d["codesign"] = design_state(self, best_to_state(self.best))
         return d
 
     def load_state_dict(self, d: dict) -> None:
         c = d["codesign"]
-        with torch.no_grad():
-            self.logits.copy_(c["logits"])
-        self.design_opt.load_state_dict(c["design_opt"])
-        self.design_rng.bit_generator.state = c["design_rng"]
-        self.records = list(c["records"])
-        self.best = [
-            {"grid": np.asarray(b["grid"], dtype=np.int64), "objective_s": b["objective_s"]} for b in c["best"]
-        ]
-        self.pool = [Design.from_grid(np.asarray(g, dtype=np.int64), self.spec.modules) for g in c["pool"]]
-        self.active = (int(c["active"][0]), int(c["active"][1]))
+        load_design_state(self, c)
+        self.best = best_from_state(c["best"])
         super().load_state_dict(d)
         self.grid = np.asarray(c["grid"], dtype=np.int64)

@@ -44,7 +44,17 @@ from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.parts import design_mass_kg, design_power_W
 from modsat_core.spec.requirements import judged, landed_within, verdict
 from modsat_core.training.diffsim import DiffsimRun, training_mission
-from modsat_core.training.diffsim_codesign import TOP_DRAWS, fixed_cells, satellites
+from modsat_core.training.diffsim_codesign import (
+    TOP_DRAWS,
+    best_from_state,
+    best_to_state,
+    design_state,
+    draw_grids,
+    fixed_cells,
+    grid_log_prob,
+    load_design_state,
+    mode_grid,
+)
 
 #: Fewest draws a distribution takes at a design update.
 MIN_DRAWS = 4
@@ -160,27 +170,14 @@ class ParetoRun(DiffsimRun):
         super().__init__(spec, device)
 
     # ------------------------------------------------------------------ the distributions
-    def probabilities(self, l: int) -> np.ndarray:
-        return torch.softmax(self.logits[l].detach(), dim=-1).numpy()
-
     def draw(self, M: int, l: int) -> tuple[np.ndarray, np.ndarray]:
-        N = self.spec.design.grid_size
-        p = self.probabilities(l)
-        u = self.design_rng.random((M, N**3, 1))
-        raw = (u > np.cumsum(p, axis=-1)[None, :, :-1]).sum(-1).reshape(M, N, N, N)
-        raw = np.where(self.fixed, self.fixed_types, raw)
-        return satellites(raw, self.fixed, self.fixed_types), raw
+        return draw_grids(self.logits[l], M, self.design_rng, self.fixed, self.fixed_types)
 
     def mode(self, l: int) -> np.ndarray:
-        N = self.spec.design.grid_size
-        raw = self.probabilities(l).argmax(-1).reshape(1, N, N, N)
-        return satellites(raw, self.fixed, self.fixed_types)[0]
+        return mode_grid(self.logits[l], self.fixed, self.fixed_types)
 
     def log_prob(self, raw: np.ndarray, l: int) -> torch.Tensor:
-        logp = torch.log_softmax(self.logits[l], dim=-1)
-        idx = torch.as_tensor(raw.reshape(len(raw), -1))
-        free = torch.as_tensor(~self.fixed.reshape(-1), dtype=torch.float64)
-        return (logp.gather(1, idx.T).T * free).sum(-1)
+        return grid_log_prob(self.logits[l], raw, self.fixed)
 
     @property
     def draws_each(self) -> int:
@@ -364,30 +361,12 @@ class ParetoRun(DiffsimRun):
     # ------------------------------------------------------------------ checkpoint
     def state_dict(self) -> dict:
         d = super().state_dict()
-        d["pareto"] = {
-            "logits": self.logits.detach().clone(),
-            "design_opt": self.design_opt.state_dict(),
-            "design_rng": self.design_rng.bit_generator.state,
-            "records": copy.deepcopy(self.records),
-            "best": [[{"grid": b["grid"].tolist(), "objective_s": b["objective_s"]} for b in bl] for bl in self.best],
-            "pool": [d.grid.tolist() for d in self.pool],
-            "active": list(self.active),
-            "grid": self.grid.tolist(),
-        }
+        d["pareto"] = design_state(self, [best_to_state(b) for b in self.best])
         return d
 
     def load_state_dict(self, d: dict) -> None:
         c = d["pareto"]
-        with torch.no_grad():
-            self.logits.copy_(c["logits"])
-        self.design_opt.load_state_dict(c["design_opt"])
-        self.design_rng.bit_generator.state = c["design_rng"]
-        self.records = list(c["records"])
-        self.best = [
-            [{"grid": np.asarray(b["grid"], dtype=np.int64), "objective_s": b["objective_s"]} for b in bl]
-            for bl in c["best"]
-        ]
-        self.pool = [Design.from_grid(np.asarray(g, dtype=np.int64), self.spec.modules) for g in c["pool"]]
-        self.active = (int(c["active"][0]), int(c["active"][1]))
+        load_design_state(self, c)
+        self.best = [best_from_state(b) for b in c["best"]]
         super().load_state_dict(d)
         self.grid = np.asarray(c["grid"], dtype=np.int64)

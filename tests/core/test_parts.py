@@ -120,7 +120,7 @@ def _codesign(**sections) -> dict:
     [
         (_codesign(modules={"wheels": [{**STRONG, "mass_kg": -1.0}]}), "modules.wheels.0.mass_kg", "allowed: > 0"),
         (_codesign(modules={"wheels": [{**STRONG, "torque_Nm": 0.0}]}), "modules.wheels.0.torque_Nm", "allowed: > 0"),
-        (_codesign(modules={"wheels": ["no-such-wheel"]}), "modules.wheels", "the library has: bct-rwp015"),
+        (_codesign(modules={"wheels": ["no-such-wheel"]}), "modules.wheels", "known: bct-rwp015"),
         (_codesign(modules={"wheels": [STRONG, STRONG]}), "modules.wheels", "repeated: strong"),
         (
             _codesign(modules={"payload": {"cells": [[0, 0, 3]], "mass_kg": 1.0}}),

@@ -29,6 +29,26 @@ function fmtTick(v) {
   return String(+v.toFixed(2));
 }
 
+// The frame of a chart: y grid lines and ticks, x ticks, the two axes and their labels.
+// a: {W, H, m (margins), X, Y (data to pixels), xt, yt (ticks), xLabel, yLabel, xLabelY}.
+function drawAxes(svg, a) {
+  const { W, H, m, X, Y } = a;
+  for (const v of a.yt) {
+    svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(v), y2: Y(v), class: "grid" }));
+    svg.appendChild(svgEl("text", { x: m.l - 6, y: Y(v) + 4, "text-anchor": "end", class: "tick" }, fmtTick(v)));
+  }
+  for (const v of a.xt) {
+    svg.appendChild(svgEl("line", { x1: X(v), x2: X(v), y1: H - m.b, y2: H - m.b + 4, class: "axis" }));
+    svg.appendChild(svgEl("text", { x: X(v), y: H - m.b + 16, "text-anchor": "middle", class: "tick" }, fmtTick(v)));
+  }
+  svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, class: "axis" }));
+  svg.appendChild(svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, class: "axis" }));
+  svg.appendChild(svgEl("text", { x: (m.l + W - m.r) / 2, y: a.xLabelY, "text-anchor": "middle", class: "label" },
+    a.xLabel || ""));
+  svg.appendChild(svgEl("text", { x: 12, y: (m.t + H - m.b) / 2, "text-anchor": "middle", class: "label",
+    transform: `rotate(-90 12 ${(m.t + H - m.b) / 2})` }, a.yLabel || ""));
+}
+
 // series: [{name, color, points: [[x, y], ...]}]; opts: {title, xLabel, yLabel, yMin, yMax, refs}
 // refs: [{name, value, color, dash}]: horizontal reference lines (e.g. the PD baseline) across
 // the plot, inside the y range, each named in the legend under the plot.
@@ -59,22 +79,9 @@ function lineChart(series, opts) {
   y0 = Math.min(y0, yt[0]); y1 = Math.max(y1, yt[yt.length - 1]);
   const X = (x) => m.l + (x - x0) / (x1 - x0) * (W - m.l - m.r);
   const Y = (y) => H - m.b - (y - y0) / (y1 - y0) * (H - m.t - m.b);
-  for (const v of yt) {
-    svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(v), y2: Y(v), class: "grid" }));
-    svg.appendChild(svgEl("text", { x: m.l - 6, y: Y(v) + 4, "text-anchor": "end", class: "tick" }, fmtTick(v)));
-  }
-  for (const v of xt) {
-    if (v < x0 || v > x1) continue;
-    svg.appendChild(svgEl("line", { x1: X(v), x2: X(v), y1: H - m.b, y2: H - m.b + 4, class: "axis" }));
-    svg.appendChild(svgEl("text", { x: X(v), y: H - m.b + 16, "text-anchor": "middle", class: "tick" }, fmtTick(v)));
-  }
-  svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, class: "axis" }));
-  svg.appendChild(svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, class: "axis" }));
   const xLabelY = H - m.b + 34;
-  svg.appendChild(svgEl("text", { x: (m.l + W - m.r) / 2, y: xLabelY, "text-anchor": "middle", class: "label" },
-    opts.xLabel || ""));
-  svg.appendChild(svgEl("text", { x: 12, y: (m.t + H - m.b) / 2, "text-anchor": "middle", class: "label",
-    transform: `rotate(-90 12 ${(m.t + H - m.b) / 2})` }, opts.yLabel || ""));
+  drawAxes(svg, { W, H, m, X, Y, xt: xt.filter((v) => v >= x0 && v <= x1), yt, xLabel: opts.xLabel,
+    yLabel: opts.yLabel, xLabelY });
   for (const r of refs) {  // under the curves
     svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(r.value), y2: Y(r.value), class: "ref",
       stroke: r.color, "stroke-dasharray": r.dash || "6 4", "data-value": r.value, "data-name": r.name }));
@@ -165,19 +172,7 @@ function frontChart(front, candidates, opts) {
   x0 = Math.min(x0, xt[0]); x1 = Math.max(x1, xt[xt.length - 1]); y1 = Math.max(y1, yt[yt.length - 1]);
   const X = (x) => m.l + (x - x0) / (x1 - x0) * (W - m.l - m.r);
   const Y = (y) => H - m.b - (y - y0) / (y1 - y0) * (H - m.t - m.b);
-  for (const v of yt) {
-    svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(v), y2: Y(v), class: "grid" }));
-    svg.appendChild(svgEl("text", { x: m.l - 6, y: Y(v) + 4, "text-anchor": "end", class: "tick" }, fmtTick(v)));
-  }
-  for (const v of xt) {
-    svg.appendChild(svgEl("text", { x: X(v), y: H - m.b + 16, "text-anchor": "middle", class: "tick" }, fmtTick(v)));
-  }
-  svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, class: "axis" }));
-  svg.appendChild(svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, class: "axis" }));
-  svg.appendChild(svgEl("text", { x: (m.l + W - m.r) / 2, y: H - 8, "text-anchor": "middle", class: "label" },
-    "total mass (kg)"));
-  svg.appendChild(svgEl("text", { x: 12, y: (m.t + H - m.b) / 2, "text-anchor": "middle", class: "label",
-    transform: `rotate(-90 12 ${(m.t + H - m.b) / 2})` }, "median settling (s)"));
+  drawAxes(svg, { W, H, m, X, Y, xt, yt, xLabel: "total mass (kg)", yLabel: "median settling (s)", xLabelY: H - 8 });
   if (Number.isFinite(opts.massBudget)) {
     svg.appendChild(svgEl("line", { x1: X(opts.massBudget), x2: X(opts.massBudget), y1: m.t, y2: H - m.b,
       class: "ref budget", stroke: "#b54", "stroke-dasharray": "6 4" }));
