@@ -184,8 +184,8 @@ class ParetoRun(DiffsimRun):
         return max(MIN_DRAWS, self.d.design_batch // len(self.prices))
 
     def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
-        """A design with the strongest wheel unit in every free cell first (a simulator slot for every
-        wheel a draw can have), then every distribution's first draws that are valid."""
+        """A design with a wheel unit in every free cell first (a simulator slot for every wheel a draw
+        can have), then every distribution's first draws that are valid."""
         N = self.spec.design.grid_size
         every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
         every[self.fixed] = self.fixed_types[self.fixed]
@@ -238,7 +238,10 @@ class ParetoRun(DiffsimRun):
         loss.backward()
         self.design_opt.step()
         middle = self.mode(L // 2)
-        self.grid = middle if (middle >= ACTUATOR).any() else self.best[L // 2][0]["grid"]
+        if (middle >= ACTUATOR).any():  # the curve flies the middle price's mode, else a best draw
+            self.grid = middle
+        else:
+            self.grid = next((b[0]["grid"] for b in [self.best[L // 2], *self.best] if b), self.grid)
         fresh = [g for g in [self.grid, *grids] if (g >= ACTUATOR).any()]
         start = len(self.pool)
         self.pool += [Design.from_grid(g, self.spec.modules) for g in fresh]
