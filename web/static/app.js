@@ -552,8 +552,8 @@ function conditionsTable(ev) {
   const cells = (s) => (s ? [fmt.pct(s.success_rate), fmt.int(s.safety_violations), fmt.num(2)(s.median_settling_time_s)]
     : ["-", "-", "-"]).map((t) => el("td", { class: "num", text: t }));
   // results first; what a condition changes last, wrapped (the combined row's list is long)
-  const head = ["condition", "policy success", "violations", "settling (s)",
-    "PD success", "violations", "settling (s)", "what changes"];
+  const head = ["condition", "policy success", "viol.", "settling (s)",
+    "PD success", "viol.", "settling (s)", "what changes"];
   return el("div", { id: "conditions" },
     el("h3", { text: "Flight conditions (same slews, policy and PD)" }),
     el("table", { class: "eval conditions" },
