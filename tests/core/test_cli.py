@@ -163,6 +163,12 @@ def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     assert r.returncode == 2 and "diffsim.design_batch: 1 is out of range" in r.stderr and "Traceback" not in r.stderr
     r = modsat("bench", "codesign", "--design-gradient", "exact")
     assert r.returncode == 2 and "invalid choice: 'exact'" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "pareto", "--preset", "diffsim-3x3x3")
+    assert r.returncode != 0 and "not a trade-off" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "pareto", "--designs", "0")
+    assert r.returncode != 0 and "--designs must be at least 1" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "pareto", "--seeds", "-1")
+    assert r.returncode == 2 and "seed: -1 is out of range" in r.stderr and "Traceback" not in r.stderr
     out = str(tmp_path / "study")
     r = modsat("study", "--preset", "quick-td3", "--seeds", "0", "--algorithms", "diffsim-control", "--out", out)
     assert r.returncode == 2 and "design.fixed_design" in r.stderr and "Traceback" not in r.stderr
