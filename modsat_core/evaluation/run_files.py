@@ -6,7 +6,6 @@ a finished run writes (docs/learning.md, "Outputs of a run").
 from __future__ import annotations
 
 import io
-import math
 from typing import Any
 
 import numpy as np
@@ -33,7 +32,7 @@ from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import Design
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.parts import design_mass_kg, design_power_W
-from modsat_core.spec.requirements import judged, landed_within, verdict
+from modsat_core.spec.requirements import requirement_verdict
 
 #: Final-evaluation tolerances reported beside the mission's own.
 REPORT_TOLERANCES_DEG = (0.25, 1.0)
@@ -137,49 +136,44 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
     out["policy"] = {"summary": mc.summary(tols), "episodes": mc.episodes}
     out["pd_baseline"] = {"summary": pd.summary(tols), "episodes": pd.episodes}
     out["trajectories"] = {"policy": mc.trajectories, "pd_baseline": pd.trajectories}
-    out["conditions"] = condition_table(actor, grid, design, spec, tols, n)
+    out["conditions"], flown = condition_table(actor, grid, design, spec, tols, n)
     conds = [ConditionEvaluation.model_validate(c) for c in out["conditions"]]
     out["flight_failures"] = [f.to_dict() for f in flight_failures(conds)]
     if spec.requirements is not None:
-        limit = spec.requirements.settling_time_s
-        shares = {"nominal": landed_within(mc.episodes, limit)}
-        judge = {c.name for c in spec.evaluation.conditions if judged(c, spec.requirements, spec.mission)}
-        for c in out["conditions"]:
-            within = c.pop("_within")
-            if c["name"] in judge:
-                shares[c["name"]] = within
-        out["requirements"] = verdict(
-            spec.requirements, design_mass_kg(grid, spec.modules), design_power_W(grid, spec.modules), shares
+        out["requirements"] = requirement_verdict(
+            spec.requirements,
+            spec.mission,
+            design_mass_kg(grid, spec.modules),
+            design_power_W(grid, spec.modules),
+            mc.episodes,
+            [(c, flown[c.name]) for c in spec.evaluation.conditions],
         )
-    else:
-        for c in out["conditions"]:
-            c.pop("_within")
     return out
 
 
 def condition_table(
     actor: torch.nn.Module, grid: np.ndarray, design: Design, spec: JobSpec, tols: tuple[float, ...], episodes: int
-) -> list[dict]:
+) -> tuple[list[dict], dict[str, list[dict]]]:
     """The policy and PD under each of ``evaluation.conditions``, on the evaluation's slews (float64,
-    the mission's physics): one row per condition with each controller's summary at ``tols``."""
+    the mission's physics): one row per condition with each controller's summary at ``tols``, and the
+    policy's slews under each condition by name (the requirements' verdict reads them)."""
     conditions = spec.evaluation.conditions
     if not conditions:
-        return []
+        return [], {}
     kw: dict[str, Any] = dict(episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
     m, mods = spec.mission, spec.modules
     pol = monte_carlo_conditions(design, controller_for(actor, grid, spec), m, mods, conditions, **kw)
     pd = monte_carlo_conditions(design, PDController, m, mods, conditions, **kw)
-    limit = spec.requirements.settling_time_s if spec.requirements is not None else math.inf
-    return [
+    rows = [
         {
             "name": c.name,
             "changes": c.changes(),
             "policy": pol[c.name].summary(tols),
             "pd_baseline": pd[c.name].summary(tols),
-            "_within": landed_within(pol[c.name].episodes, limit),  # for the requirements' verdict
         }
         for c in conditions
     ]
+    return rows, {c.name: pol[c.name].episodes for c in conditions}
 
 
 def curve_png(curve: list[dict], title: str) -> bytes:

@@ -152,8 +152,12 @@ class JobSpec(_Section):
         """A budget below the lightest satellite the grid can hold (the payload and one wheel unit of the
         lightest, least power-hungry type) is refused: no design could meet it."""
         m = self.modules
-        payload = m.payload.mass_kg * len(m.payload.cells) if m.payload is not None else 0.0
-        payload += m.module_mass_kg * len(self.objective.payload_cells)
+        # the payload: the catalog's cells at their mass, else the objective's as structure (when both are
+        # given they are the same cells, checked above)
+        if m.payload is not None:
+            payload = m.payload.mass_kg * len(m.payload.cells)
+        else:
+            payload = m.module_mass_kg * len(self.objective.payload_cells)
         unit = min(unit_mass_kg(m, k) for k in range(len(m.wheels) if m.wheels else 1))
         if r.mass_budget_kg is not None and r.mass_budget_kg < payload + unit:
             raise ValueError(

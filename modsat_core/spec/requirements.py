@@ -104,3 +104,19 @@ def verdict(
         "power_W": power_W,
         "landed_within_settling_time": shares,
     }
+
+
+def requirement_verdict(
+    req: Requirements,
+    mission: Mission,
+    mass_kg: float,
+    power_W: float | None,
+    nominal: list[dict[str, Any]],
+    flights: list[tuple[Condition, list[dict[str, Any]]]],
+) -> dict[str, Any]:
+    """:func:`verdict` from the slews flown: the ``nominal`` rows and each condition's (``flights``); the
+    conditions outside the required slews (:func:`judged`) do not count."""
+    limit = req.settling_time_s
+    shares = {"nominal": landed_within(nominal, limit)}
+    shares.update({c.name: landed_within(eps, limit) for c, eps in flights if judged(c, req, mission)})
+    return verdict(req, mass_kg, power_W, shares)

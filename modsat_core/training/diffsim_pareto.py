@@ -29,7 +29,6 @@ middle price (the final evaluation says then that no front point meets them, wit
 from __future__ import annotations
 
 import copy
-import math
 from typing import Any
 
 import numpy as np
@@ -40,9 +39,10 @@ from modsat_core.agent.policy_file import actor_from_state
 from modsat_core.evaluation.monte_carlo import monte_carlo, monte_carlo_conditions
 from modsat_core.grid import ACTUATOR, EMPTY
 from modsat_core.sim.slew import Design
+from modsat_core.spec.evaluation import Condition
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.parts import design_mass_kg, design_power_W
-from modsat_core.spec.requirements import judged, landed_within, verdict
+from modsat_core.spec.requirements import judged, requirement_verdict
 from modsat_core.training.diffsim import DiffsimRun, training_mission
 from modsat_core.training.diffsim_codesign import (
     TOP_DRAWS,
@@ -284,37 +284,34 @@ class ParetoRun(DiffsimRun):
         # those that are not flight-ready, and take the front again, until every point of it is.
         pool = list(landed)
         while True:
-            pts = np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in pool])
-            front = sorted([r for r, k in zip(pool, nondominated(pts), strict=True) if k], key=lambda r: r["mass_kg"])
-            for r in front:
-                if "conditions" not in r:
-                    self.fly_conditions(r, pol)
-            unready = [r for r in front if not r["flight_ready"]]
-            if not unready:
+            front = self.flown_front(pool, pol)
+            if all(r["flight_ready"] for r in front):
                 break
             pool = [r for r in pool if r.get("flight_ready") is not False]
             if not pool:  # no candidate is flight-ready: the nominal front, each point saying so
-                pts = np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in landed])
-                keep = nondominated(pts)
-                front = sorted([r for r, k in zip(landed, keep, strict=True) if k], key=lambda r: r["mass_kg"])
-                for r in front:
-                    if "conditions" not in r:
-                        self.fly_conditions(r, pol)
+                front = self.flown_front(landed, pol)
                 break
         for r in records:
             r.pop("_episodes")
         return records, front
+
+    def flown_front(self, pool: list[dict[str, Any]], pol: torch.nn.Module) -> list[dict[str, Any]]:
+        """The non-dominated records of ``pool`` over (mass, median settling), lightest first, each flown
+        under the conditions (:meth:`fly_conditions`) unless it already was."""
+        pts = np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in pool])
+        front = sorted([r for r, k in zip(pool, nondominated(pts), strict=True) if k], key=lambda r: r["mass_kg"])
+        for r in front:
+            if "conditions" not in r:
+                self.fly_conditions(r, pol)
+        return front
 
     def fly_conditions(self, r: dict[str, Any], pol: torch.nn.Module) -> None:
         """A candidate's flight under every condition of ``evaluation.conditions`` (success per
         condition), whether it is flight-ready (at least :data:`FLIGHT_READY_SHARE` under each judged
         one) and its requirements' verdict; written into the record ``r``."""
         spec, ev = self.spec, self.spec.evaluation
-        limit = spec.requirements.settling_time_s if spec.requirements is not None else math.inf
         grid = np.asarray(r["grid"], dtype=np.int64)
-        shares = {"nominal": landed_within(r["_episodes"], limit)}
-        conds: dict[str, float] = {}
-        ready = r["success"] >= FLIGHT_READY_SHARE
+        flights: list[tuple[Condition, list[dict]]] = []
         if ev.conditions:
             design = Design.from_grid(grid, spec.modules)
             with torch.no_grad():
@@ -328,15 +325,17 @@ class ParetoRun(DiffsimRun):
                     seed=ev.seed,
                     dtype=torch.float64,
                 )
-            for c in ev.conditions:
-                eps = res[c.name].episodes
-                conds[c.name] = sum(bool(e["success"]) for e in eps) / len(eps)
-                if spec.requirements is None or judged(c, spec.requirements, spec.mission):
-                    shares[c.name] = landed_within(eps, limit)
-                    ready = ready and conds[c.name] >= FLIGHT_READY_SHARE
+            flights = [(c, res[c.name].episodes) for c in ev.conditions]
+        conds = {c.name: sum(bool(e["success"]) for e in eps) / len(eps) for c, eps in flights}
+        counted = [
+            c.name for c, _ in flights if spec.requirements is None or judged(c, spec.requirements, spec.mission)
+        ]
+        ready = r["success"] >= FLIGHT_READY_SHARE and all(conds[n] >= FLIGHT_READY_SHARE for n in counted)
         r["conditions"], r["flight_ready"] = conds, bool(ready)
         if spec.requirements is not None:
-            v = verdict(spec.requirements, r["mass_kg"], r["power_W"], shares)
+            v = requirement_verdict(
+                spec.requirements, spec.mission, r["mass_kg"], r["power_W"], r["_episodes"], flights
+            )
             r["meets"], r["reasons"] = v["meets"], v["reasons"]
 
     def chosen(self) -> tuple[torch.nn.Module, np.ndarray, dict]:

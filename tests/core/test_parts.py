@@ -162,6 +162,20 @@ def test_a_bad_catalog_or_requirement_is_refused_naming_it(data, where, words):
     assert where in text and words in text, text
 
 
+def test_a_payload_named_in_both_places_is_weighed_once():
+    """The objective's payload cells and the catalog's, the same cells: the lightest satellite is the payload
+    (1 kg) and one unit of the lightest type (1 + 3 x 0.1 kg), 2.3 kg, not the payload counted twice."""
+    both = _codesign(
+        modules={"payload": {"cells": [[0, 0, 0]], "mass_kg": 1.0}},
+        objective={"payload_cells": [[0, 0, 0]]},
+        requirements={"settling_time_s": 20, "mass_budget_kg": 3.0},
+    )
+    assert parse_spec(both).requirements is not None
+    both["requirements"]["mass_budget_kg"] = 2.2
+    with pytest.raises(SpecError, match=r"lightest satellite the grid can hold \(2.3 kg"):
+        parse_spec(both)
+
+
 def test_old_specs_load_as_they_were():
     spec = JobSpec()
     assert spec.modules.wheels is None and spec.modules.payload is None and spec.requirements is None
