@@ -142,9 +142,9 @@ def _cmd_bench_pareto(args: argparse.Namespace) -> int:
         raise SystemExit(
             f"modsat bench pareto: preset {args.preset!r} is not a trade-off (no objective.trade_off_prices_s_per_kg)"
         )
-    for name in ("designs", "slews"):
-        if getattr(args, name) < 1:
-            raise SystemExit(f"modsat bench pareto: --{name} must be at least 1")
+    for name, most in (("designs", 10_000), ("slews", 1_000)):
+        if not 1 <= getattr(args, name) <= most:
+            raise SystemExit(f"modsat bench pareto: --{name} must be between 1 and {most:,}")
     prepare_report_path(args.out)
     report = bench_pareto(args.preset, args.seeds, args.designs, args.slews)
     print_report(report, args.out)

@@ -166,7 +166,9 @@ def test_bench_learning_rejects_bad_input_before_training(tmp_path):
     r = modsat("bench", "pareto", "--preset", "diffsim-3x3x3")
     assert r.returncode != 0 and "not a trade-off" in r.stderr and "Traceback" not in r.stderr
     r = modsat("bench", "pareto", "--designs", "0")
-    assert r.returncode != 0 and "--designs must be at least 1" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode != 0 and "--designs must be between 1 and 10,000" in r.stderr and "Traceback" not in r.stderr
+    r = modsat("bench", "pareto", "--slews", "1000000")
+    assert r.returncode != 0 and "--slews must be between 1 and 1,000" in r.stderr and "Traceback" not in r.stderr
     r = modsat("bench", "pareto", "--seeds", "-1")
     assert r.returncode == 2 and "seed: -1 is out of range" in r.stderr and "Traceback" not in r.stderr
     out = str(tmp_path / "study")
