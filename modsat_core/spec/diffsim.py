@@ -19,7 +19,7 @@ class Diffsim(_Section):
         description=(
             "`pd`: the torque is the design's PD law (the baseline's) plus the network's correction, "
             "which starts near zero, so training starts from PD's slews and makes them faster. `none`: "
-            "the network alone (learned from scratch; its slews settled 9-28 % later than PD's)."
+            "the network alone (learned from scratch; its slews settle later than PD's, docs/diffsim.md)."
         ),
     )
     design_pool: int = Field(
