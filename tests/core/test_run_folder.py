@@ -15,7 +15,7 @@ from modsat_core.evaluation.study_report import saved_run
 
 #: A run kept from before policy files, trajectories and the removal of eight training keys
 #: (its spec.json lists them at their no-op values).
-OLD_RUN = Path(__file__).resolve().parents[2] / "docs" / "reproduction" / "3x3x3" / "runs" / "td3-codesign-seed0"
+OLD_RUN = Path(__file__).resolve().parents[1] / "data" / "reproduction" / "3x3x3" / "runs" / "td3-codesign-seed0"
 
 
 def test_an_old_run_folder_opens_and_only_the_files_it_lacks_are_missing():

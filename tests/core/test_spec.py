@@ -9,7 +9,7 @@ from modsat_core.spec.jobspec import JobSpec, SpecError, Training, parse_spec
 from modsat_core.spec.presets import PRESETS, get_preset
 from modsat_core.spec.training import REMOVED_KEYS
 
-DOCS = Path(__file__).resolve().parents[2] / "docs"
+KEPT = Path(__file__).resolve().parents[1] / "data" / "reproduction"  # the reproduction's kept runs
 
 
 def messages(data) -> list[str]:
@@ -164,7 +164,7 @@ def test_exploration_noise_schedule():
 def test_a_removed_training_key_at_its_no_op_value_loads_and_is_dropped():
     """Every saved run's spec.json lists every key of its day: the removed ones at their no-op
     values load (the 3x3x3 reproduction's spec is one)."""
-    saved = json.loads((DOCS / "reproduction" / "3x3x3" / "spec.json").read_text())
+    saved = json.loads((KEPT / "3x3x3" / "spec.json").read_text())
     assert {k: saved["training"][k] for k in REMOVED_KEYS} == REMOVED_KEYS
     spec = parse_spec(saved)
     assert not REMOVED_KEYS.keys() & spec.training.model_dump().keys()

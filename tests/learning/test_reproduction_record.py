@@ -1,5 +1,6 @@
-"""docs/reproduction.md's table is the report of the runs kept beside it: redrawn from their files, it
-must come out the same, and the page must show it (a rerun or an edit of either shows up here)."""
+"""docs/reproduction.md's table is the report of the runs kept for it (tests/data/reproduction/): redrawn
+from their files, it must come out the same, and the page must show it (a rerun or an edit of either
+shows up here)."""
 
 from __future__ import annotations
 
@@ -11,12 +12,14 @@ import pytest
 from modsat_core.evaluation.run_folder import RunFolder
 from modsat_core.evaluation.study_report import saved_run, study, table_markdown
 
-DOCS = Path(__file__).resolve().parents[2] / "docs"
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+KEPT = ROOT / "tests" / "data" / "reproduction"
 
 
 @pytest.mark.parametrize(("grid", "seeds"), [("3x3x3", 3), ("5x5x5", 3)])
 def test_the_reproduction_table_is_the_report_of_the_kept_runs(grid, seeds):
-    root = DOCS / "reproduction" / grid
+    root = KEPT / grid
     runs = [saved_run(RunFolder(p)) for p in sorted((root / "runs").iterdir())]
     result = study(runs)
     assert {label: a["finished"] for label, a in result["algorithms"].items()} == {"RL co-design": seeds, "GA": seeds}
