@@ -1,5 +1,5 @@
 """``modsat presets``, ``schema``, ``check``, ``train``, ``eval`` and ``verify``: a spec, its run and
-the run's evaluation; their handlers and their parsers (wired into server/cli.py by ``add_run_parsers``)."""
+the run's evaluation; their handlers and their parsers (wired into server/cli/__init__.py by ``add_run_parsers``)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import signal
 import sys
 import time
 
-from .cli_common import check_limits, load_spec, log, set_threads
+from .common import check_limits, load_spec, log, set_threads
 
 
 def _cmd_presets(args: argparse.Namespace) -> int:

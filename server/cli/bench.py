@@ -1,13 +1,15 @@
-"""``modsat bench ...``: sim, update, learn, rl-vs-ga, control, learners, designs and codesign, their
-handlers and their parsers (wired into server/cli.py by ``add_bench_parsers``)."""
+"""``modsat bench ...``: sim, update, learn, rl-vs-ga, control, learners, designs, pareto, codesign
+(modsat_core.bench) and service (the job service's, server/service_bench.py), their
+handlers and their parsers (wired into server/cli/__init__.py by ``add_bench_parsers``)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import sys
 
-from .cli_common import load_spec, log, prepare_report_path, print_report, set_threads
+from .common import load_spec, log, prepare_report_path, print_report, set_threads
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -178,6 +180,63 @@ def _cmd_bench_learners(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_service(args: argparse.Namespace) -> int:
+    what = args.what_service or ["api", "queue"]
+    if what == ["threads"]:
+        if not all(1 <= n <= 256 for n in args.threads) or not 0 <= args.busy <= 64:
+            print("modsat bench service: --threads from 1 to 256, --busy from 0 to 64", file=sys.stderr)
+            return 2
+    elif set(what) - {"api", "queue"}:
+        print("modsat bench service: what to measure: api and/or queue, or threads alone", file=sys.stderr)
+        return 2
+    from server.service_bench import bench_service, bench_threads
+
+    if what == ["threads"]:
+        report = {"machine": {"cpus": os.cpu_count()}, "threads": bench_threads(args.threads, args.busy)}
+    else:
+        report = bench_service(
+            what,
+            db=args.db,
+            pg=args.pg,
+            jobs=args.jobs,
+            clients=args.clients,
+            requests=args.requests,
+            workers=args.workers,
+            quiet=args.json,
+        )
+    print(json.dumps(report, indent=2))
+    return 0
+
+
+def _add_service_parser(bsub) -> None:
+    bsv = bsub.add_parser(
+        "service",
+        help="the job service: API latency and queue throughput on SQLite and PostgreSQL, or torch threads (JSON)",
+    )
+    bsv.add_argument("what_service", nargs="*", metavar="what", help="api and/or queue (default: both), or threads")
+    bsv.add_argument(
+        "--threads",
+        type=int,
+        nargs="+",
+        default=[1, 2],
+        help="threads: MODSAT_TORCH_THREADS values to compare (default 1 2)",
+    )
+    bsv.add_argument("--busy", type=int, default=1, help="threads: other CPU-bound processes meanwhile (default 1)")
+    bsv.add_argument("--db", nargs="+", choices=["sqlite", "postgresql"], default=["sqlite", "postgresql"])
+    bsv.add_argument(
+        "--pg",
+        metavar="URL",
+        help="admin URL of a PostgreSQL server (a database is created and dropped; default MODSAT_BENCH_PG_URL, "
+        "else postgresql://postgres@127.0.0.1:5432/postgres)",
+    )
+    bsv.add_argument("--jobs", type=int, default=1000)
+    bsv.add_argument("--clients", type=int, default=50)
+    bsv.add_argument("--requests", type=int, default=3000)
+    bsv.add_argument("--workers", type=int, default=4)
+    bsv.add_argument("--json", action="store_true", help="print only the JSON report")
+    bsv.set_defaults(func=_cmd_bench_service)
+
+
 def add_bench_parsers(sub) -> None:
     """Add ``bench`` and its sub-commands to the ``modsat`` sub-command parser ``sub``."""
     b = sub.add_parser("bench", help="benchmarks (not tests): print rates and ratios")
@@ -291,3 +350,5 @@ def add_bench_parsers(sub) -> None:
     bcd.add_argument("--no-ga", action="store_true", help="leave out the GA row (halves the bench's time)")
     bcd.add_argument("--out", help="also write the JSON report to this file")
     bcd.set_defaults(func=_cmd_bench_codesign, threads=None)
+
+    _add_service_parser(bsub)

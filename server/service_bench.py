@@ -1,4 +1,5 @@
-"""Benchmarks of the job service (not tests): ``python -m server.bench [api] [queue] [--json]``.
+"""Benchmarks of the job service (not tests): ``modsat bench service [api] [queue] [--json]``
+(its parser: server/cli/bench.py).
 
 * ``api``: p50 / p99 latency of ``GET /api/jobs`` with 1,000 jobs stored, under 50
   concurrent clients on loopback (uvicorn in a subprocess, one process, as ``modsat serve``
@@ -8,6 +9,8 @@
   the whole queue life of a job without its training); plus ``workers``: real
   ``python -m worker --runner noop`` processes, which also start a training child
   process per job.
+* ``threads``: the run time of one short job through ``modsat serve`` with each
+  ``MODSAT_TORCH_THREADS`` while other CPU-bound processes run.
 
 SQLite is a file in a temporary directory; PostgreSQL is a database created for the run on
 the server of ``--pg`` (default ``postgresql://postgres@127.0.0.1:5432/postgres``), skipped
@@ -16,7 +19,6 @@ with the reason if it cannot be reached.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import multiprocessing as mp
@@ -340,74 +342,46 @@ def bench_threads(threads: list[int], busy: int = 1) -> dict:
     return out
 
 
-# ----------------------------------------------------------------------------- main
+# ----------------------------------------------------------------------------- the report
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m server.bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("what", nargs="*", help="api and/or queue (default: both), or threads")
-    p.add_argument(
-        "--threads",
-        type=int,
-        nargs="+",
-        default=[1, 2],
-        help="threads: MODSAT_TORCH_THREADS values to compare (default 1 2)",
-    )
-    p.add_argument("--busy", type=int, default=1, help="threads: other CPU-bound processes meanwhile (default 1)")
-    p.add_argument("--db", nargs="+", choices=["sqlite", "postgresql"], default=["sqlite", "postgresql"])
-    p.add_argument(
-        "--pg",
-        default=os.environ.get("MODSAT_BENCH_PG_URL", DEFAULT_PG),
-        metavar="URL",
-        help="admin URL of a PostgreSQL server (a database is created and dropped)",
-    )
-    p.add_argument("--jobs", type=int, default=1000)
-    p.add_argument("--clients", type=int, default=50)
-    p.add_argument("--requests", type=int, default=3000)
-    p.add_argument("--workers", type=int, default=4)
-    p.add_argument("--json", action="store_true", help="print only the JSON report")
-    args = p.parse_args(argv)
-    args.what = args.what or ["api", "queue"]
-    if args.what == ["threads"]:
-        if not all(1 <= n <= 256 for n in args.threads) or not 0 <= args.busy <= 64:
-            p.error("--threads from 1 to 256, --busy from 0 to 64")
-        print(
-            json.dumps(
-                {"machine": {"cpus": os.cpu_count()}, "threads": bench_threads(args.threads, args.busy)}, indent=2
-            )
-        )
-        return 0
-    if set(args.what) - {"api", "queue"}:
-        p.error("what to measure: api and/or queue, or threads alone")
-
+def bench_service(
+    what: list[str],
+    *,
+    db: list[str],
+    pg: str | None,
+    jobs: int,
+    clients: int,
+    requests: int,
+    workers: int,
+    quiet: bool = False,
+) -> dict:
+    """``modsat bench service api queue``: the report of each database in ``db`` (a line per database
+    on stderr as it finishes unless ``quiet``)."""
+    pg = pg or os.environ.get("MODSAT_BENCH_PG_URL", DEFAULT_PG)
     report: dict = {
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
         "results": {},
     }
     with tempfile.TemporaryDirectory(prefix="modsat-bench-") as tmp:
-        for kind, url, cleanup in _databases(args.db, args.pg, Path(tmp)):
+        for kind, url, cleanup in _databases(db, pg, Path(tmp)):
             res: dict = {}
             report["results"][kind] = res
             if url is None:
                 res["error"] = cleanup
                 continue
             try:
-                if "api" in args.what:
-                    res["api"] = bench_api(url, jobs=args.jobs, clients=args.clients, requests=args.requests)
+                if "api" in what:
+                    res["api"] = bench_api(url, jobs=jobs, clients=clients, requests=requests)
                     JobStore(url).drop_schema()
-                if "queue" in args.what:
+                if "queue" in what:
                     for mode in ("claim", "cycle"):
-                        res[f"queue_{mode}"] = bench_claims(url, jobs=args.jobs, workers=args.workers, mode=mode)
+                        res[f"queue_{mode}"] = bench_claims(url, jobs=jobs, workers=workers, mode=mode)
                         JobStore(url).drop_schema()
-                    res["queue_worker_processes"] = bench_worker_processes(url, jobs=40, workers=args.workers)
+                    res["queue_worker_processes"] = bench_worker_processes(url, jobs=40, workers=workers)
                     JobStore(url).drop_schema()
             finally:
                 cleanup()
-            if not args.json:
+            if not quiet:
                 print(f"{kind}: {json.dumps(res)}", file=sys.stderr, flush=True)
-    print(json.dumps(report, indent=2))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    return report

@@ -1,6 +1,6 @@
 """What the ``modsat`` commands share: the log line, a benchmark's report, torch's threads, a spec
-from ``--preset`` or a file, and the service's limits. server/cli.py, server/cli_bench.py and
-server/cli_run.py import it; it imports none of them."""
+from ``--preset`` or a file, and the service's limits. The parser (__init__.py), bench.py and
+run.py import it; it imports none of them."""
 
 from __future__ import annotations
 

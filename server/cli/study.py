@@ -1,5 +1,5 @@
 """``modsat study`` (a study run locally: one spec over seeds and algorithms, then its report) and
-``modsat report`` (the figure, the table and the designs of saved runs); wired into server/cli.py."""
+``modsat report`` (the figure, the table and the designs of saved runs); wired into server/cli/__init__.py."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from typing import IO
 
 
 def add_commands(sub, load_spec, check_limits) -> None:
-    """``load_spec`` and ``check_limits``: `modsat train`'s (server/cli_common.py), passed in, not imported back."""
+    """``load_spec`` and ``check_limits``: `modsat train`'s (server/cli/common.py), passed in, not imported back."""
     s = sub.add_parser(
         "study",
         help="run one spec over several seeds, RL co-design and its GA twin, here; then write their report",

@@ -2,11 +2,12 @@
 
 It lives in the top layer because it runs everything: training and benchmarks
 (modsat_core), the 3D recordings (web), the service's limits (worker) and the service.
-The commands live by family: server/cli_bench.py (``bench ...``), server/cli_run.py
-(``presets``, ``schema``, ``check``, ``train``, ``eval``, ``verify``), server/cli_service.py
-(``serve``, ``worker``, ``view``) and server/cli_study.py (``study``, ``report``), with what
-they share in server/cli_common.py. Imports stay inside the commands so that
-``modsat presets`` or ``modsat check`` never load torch."""
+The commands live by family, one module each: bench.py (``bench ...``), run.py
+(``presets``, ``schema``, ``check``, ``train``, ``eval``, ``verify``), service.py
+(``serve``, ``worker``, ``view``) and study.py (``study``, ``report``), with what
+they share in common.py. Imports stay inside the commands so that
+``modsat presets`` or ``modsat check`` never load torch. ``python -m server.cli`` runs
+``main`` (__main__.py)."""
 
 from __future__ import annotations
 
@@ -14,9 +15,9 @@ import argparse
 import os
 import sys
 
-from .cli_bench import add_bench_parsers
-from .cli_common import check_limits, load_spec
-from .cli_run import _ProgressBar, add_run_parsers
+from .bench import add_bench_parsers
+from .common import check_limits, load_spec
+from .run import _ProgressBar, add_run_parsers
 
 __all__ = ["_ProgressBar", "build_parser", "main"]  # _ProgressBar: tests/core/test_cli.py imports it from here
 
@@ -35,10 +36,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_service_commands(sub) -> None:
     """`serve` and `worker` live with the service (server/, worker/), in the same distribution."""
-    from . import cli_service, cli_study
+    from . import service, study
 
-    cli_service.add_commands(sub)
-    cli_study.add_commands(sub, load_spec, check_limits)
+    service.add_commands(sub)
+    study.add_commands(sub, load_spec, check_limits)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,7 +68,3 @@ def main(argv: list[str] | None = None) -> int:
         msg = exc.args[0] if isinstance(exc, KeyError) else f"{exc.strerror or exc}: {exc.filename}"
         print(f"modsat: {msg}", file=sys.stderr)
         return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

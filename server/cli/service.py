@@ -1,4 +1,4 @@
-"""``modsat serve``, ``modsat worker`` and ``modsat view`` (wired into server/cli.py by ``add_commands``)."""
+"""``modsat serve``, ``modsat worker`` and ``modsat view`` (wired into server/cli/__init__.py by ``add_commands``)."""
 
 from __future__ import annotations
 
@@ -106,8 +106,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
     from worker.store import JobStore
 
-    from .app import create_app
-    from .settings import ServerSettings
+    from ..app import create_app
+    from ..settings import ServerSettings
 
     if args.workers < 0 or args.workers > 256:
         print("modsat serve: --workers must be between 0 and 256", file=sys.stderr)
