@@ -1,7 +1,7 @@
 """The FastAPI application: ``create_app()`` (uvicorn: ``server.app:create_app --factory``).
 
 Everything lives under ``/api``; ``/`` is the web UI (web/, static files), ``/viser-client/``
-viser's static client, and the live 3D viewer runs in the lifespan (server/viewer.py).
+viser's static client, and the live 3D viewer runs in the lifespan (server/hosting.py).
 Nothing a client sends may produce a 5xx: bodies are size-limited before they are read,
 parsed by hand (400 / 422 with messages that name the field), ids out of range are 404.
 """
@@ -13,7 +13,7 @@ from collections.abc import Callable
 from contextlib import asynccontextmanager
 from typing import Any
 
-from fastapi import APIRouter, FastAPI, HTTPException, Request
+from fastapi import APIRouter, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
@@ -25,17 +25,16 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import modsat_core
 from modsat_core.spec.jobspec import JobSpec
-from modsat_core.spec.presets import PRESETS
 from worker.store import JobStore
 
-from .deps import StoreDep
-from .routes_jobs import router as jobs_router
-from .routes_studies import StudySubmission
-from .routes_studies import router as studies_router
-from .schemas import Health, PresetInfo, PresetSubmission, clip
+from .hosting import mount_static, start_viewer
+from .routers.jobs import router as jobs_router
+from .routers.service import service_router
+from .routers.studies import router as studies_router
+from .routers.viewer import viewer_router
+from .schemas import PresetSubmission, StudySubmission
 from .security import CrossSiteGuard
 from .settings import ServerSettings
-from .viewer import mount_static, start_viewer, viewer_router
 
 log = logging.getLogger("modsat.server")
 
@@ -130,50 +129,6 @@ def _install_error_handlers(app: FastAPI) -> None:
     async def _db_error(_request: Request, exc: SQLAlchemyError) -> JSONResponse:
         log.exception("database error", exc_info=exc)
         return JSONResponse({"detail": "database error; see the server log"}, status_code=500)
-
-
-def _misc_router() -> APIRouter:
-    r = APIRouter(prefix="/api")
-
-    @r.get("/presets", response_model=list[PresetInfo], tags=["specs"])
-    def list_presets() -> list[PresetInfo]:
-        """The named specs. Submit one with `{"preset": NAME}`."""
-        return [
-            PresetInfo(
-                name=n,
-                algorithm=s.algorithm,
-                grid_size=s.design.grid_size,
-                total_env_steps=s.training.total_env_steps,
-                url=f"/api/presets/{n}",
-            )
-            for n, s in PRESETS.items()
-        ]
-
-    @r.get("/presets/{name}", response_model=JobSpec, tags=["specs"], responses={404: {"description": "Unknown"}})
-    def get_preset(name: str) -> JobSpec:
-        """One preset as a whole JobSpec (edit it and POST it to /api/jobs)."""
-        if name not in PRESETS:
-            raise HTTPException(404, f"no preset named {clip(name)}; known: {', '.join(PRESETS)}")
-        return PRESETS[name]
-
-    @r.get("/schema", tags=["specs"])
-    def spec_schema() -> dict[str, Any]:
-        """The JSON schema of JobSpec (every field, its bounds and its description)."""
-        return JobSpec.model_json_schema()
-
-    @r.get("/health", response_model=Health, tags=["service"], responses={503: {"description": "Database down"}})
-    def health(store: StoreDep) -> Health:
-        """Database reachable, jobs per status, live workers."""
-        workers = store.live_workers()
-        return Health(
-            status="ok",
-            version=modsat_core.__version__,
-            database=store.backend,
-            jobs=store.status_counts(),
-            workers=[{k: w[k] for k in ("id", "hostname", "pid", "runner", "job_id")} for w in workers],
-        )
-
-    return r
 
 
 def _api_not_found(routers: list[APIRouter]) -> APIRouter:
@@ -293,7 +248,7 @@ def create_app(
     if store is not None:
         app.state.store = store
     _install_error_handlers(app)
-    routers = [jobs_router, studies_router, _misc_router(), viewer_router()]
+    routers = [jobs_router, studies_router, service_router(), viewer_router()]
     for router in routers:
         app.include_router(router)
     app.include_router(_api_not_found(routers))

@@ -11,7 +11,9 @@ from fastapi import Path
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 
 from modsat_core.artefacts import CurvePoint, ProgressRecord, RunSummary
+from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.presets import PRESETS
+from modsat_core.spec.study import ALGORITHMS, DEFAULT_ALGORITHMS, MAX_SEEDS
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
@@ -260,3 +262,78 @@ def artifact_info(job_id: int, row: dict[str, Any]) -> ArtifactInfo:
         created_at=_time(row["created_at"]),
         url=f"/api/jobs/{job_id}/artifacts/{row['name']}",
     )
+
+
+# ----------------------------------------------------------------------------- studies (/api/studies)
+
+
+class StudySubmission(BaseModel):
+    """A study: ``spec`` (a JobSpec, or ``{"preset": NAME, "overrides": {...}}``) flown once per
+    seed and algorithm; every job is the spec with its own ``seed`` and ``algorithm``."""
+
+    spec: dict[str, Any] = Field(description='A JobSpec, or {"preset": NAME, "overrides": {...}}.')
+    seeds: list[Annotated[int, Field(ge=0, lt=2**31)]] = Field(
+        min_length=1,
+        max_length=MAX_SEEDS,
+        description=f"1 to {MAX_SEEDS} distinct seeds.",
+        examples=[[0, 1, 2]],
+        json_schema_extra={"uniqueItems": True},
+    )
+    algorithms: list[Literal[ALGORITHMS]] = Field(  # type: ignore[valid-type]
+        default=list(DEFAULT_ALGORITHMS),
+        min_length=1,
+        description="RL co-design and/or its GA twin (or the controllers of a fixed design); distinct.",
+        json_schema_extra={"uniqueItems": True},
+    )
+
+
+class StudyJob(BaseModel):
+    id: int
+    url: str
+    algorithm: str
+    seed: int
+    status: JobStatus
+    env_steps: int
+    total_env_steps: int
+    run_seconds: float
+    last_eval: CurvePoint | None
+    error: str | None
+
+
+class StudySummary(BaseModel):
+    id: int
+    name: str | None
+    seeds: list[int]
+    algorithms: list[str]
+    created_at: datetime
+    counts: dict[str, int] = Field(description="Its jobs per status.")
+    url: str
+
+
+class StudyList(BaseModel):
+    total: int
+    limit: int
+    offset: int
+    items: list[StudySummary]
+
+
+class StudyDetail(StudySummary):
+    spec: JobSpec
+    status: Literal["queued", "running", "ended"] = Field(description="`ended` once every job has ended.")
+    jobs: list[StudyJob]
+    aggregate: dict[str, Any] = Field(
+        description="Per method: final Monte-Carlo figures of its finished runs (mean, std, n over seeds), PD on "
+        "their designs, the designs' symmetry numbers, and the learning curves (mean and std over seeds)."
+    )
+    table_markdown: str
+    figure_url: str
+
+
+# ----------------------------------------------------------------------------- the viewer (/api/viewer)
+
+
+class ViewerInfo(BaseModel):
+    enabled: bool = Field(description="Whether the live viewer runs in this server.")
+    port: int | None = Field(description="The port it really listens on (same host as the API).")
+    client: str = Field(description="Path of viser's static client on this server (live and recordings).")
+    recording: str = Field(description="Artefact name of a finished job's .viser recording.")

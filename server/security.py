@@ -14,7 +14,7 @@ service would take such a request for the user's own. So, for HTTP and websocket
 * Websockets (the API has none; the viewer's are checked in web/live/guard.py with the
   same rules, web/origin.py) must come from a page on an allowed host.
 
-Submissions must also be ``application/json`` (415), see routes_jobs.py.
+Submissions must also be ``application/json`` (415), see routers/jobs.py.
 
 No other site may frame the page (clickjacking: the job page's Cancel is one click away): every HTTP
 answer carries ``X-Frame-Options: DENY`` and ``Content-Security-Policy: frame-ancestors 'none'``,

@@ -117,8 +117,8 @@ class WorkerProc:
         from sqlalchemy import select
         from sqlalchemy.exc import OperationalError
 
-        from worker.db import jobs
         from worker.store import JobStore
+        from worker.store.schema import jobs
 
         probe = JobStore(db_url, busy_timeout_s=0.2)
         try:

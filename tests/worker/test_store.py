@@ -316,7 +316,7 @@ def _old_sqlite_store(path) -> str:
     from sqlalchemy.dialects import sqlite
     from sqlalchemy.schema import CreateIndex, CreateTable
 
-    from worker.db import metadata
+    from worker.store.schema import metadata
 
     con = sqlite3.connect(path)
     for table in metadata.sorted_tables:
@@ -356,7 +356,7 @@ def test_an_older_sqlite_store_is_migrated_and_keeps_its_jobs(tmp_path):
 def test_queue_cap_holds_under_parallel_submissions(store):
     """Counting the active jobs and queueing one are one step: parallel submissions never
     take the queue past its cap."""
-    from worker.db import QueueFull
+    from worker.store import QueueFull
 
     for _ in range(7):
         submit(store)

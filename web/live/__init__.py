@@ -3,7 +3,7 @@ designed satellites and plays back their evaluation slews with time plots beside
 
 Every connected browser gets its own session (``client.scene`` / ``client.gui``): what one
 person picks or plays does not move anyone else's view. The runs come from a
-:class:`RunSource`: the job store under ``modsat serve`` (server/viewer.py), or run
+:class:`RunSource`: the job store under ``modsat serve`` (server/hosting.py), or run
 directories under ``modsat view``. A tab may pre-select through the query string of its
 websocket URL (the web page embeds viser's client with
 ``?websocket=ws://HOST:PORT/?run=KEY&compare=KEY&controller=pd_baseline&episode=2&t=1.5``).

@@ -1,5 +1,5 @@
 """Where the live viewer finds runs: the :class:`RunSource` protocol, and :class:`DirRuns` for
-``modsat view`` (the job store's source, for ``modsat serve``, is server/viewer.py's)."""
+``modsat view`` (the job store's source, for ``modsat serve``, is server/hosting.py's)."""
 
 from __future__ import annotations
 

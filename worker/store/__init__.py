@@ -1,5 +1,7 @@
-"""The job store: every SQL statement of the service lives in this package, one module per concept.
+"""The job store: the service's SQL schema and every SQL statement of it live in this package, one
+module per concept. The API (server/) and the workers import it alike.
 
+* :mod:`.schema`: the tables, the database clock, the engine set-up and the migrations;
 * :mod:`.base`: the engine, the transactions, creating (and migrating) the tables;
 * :mod:`.jobs`: submitting, reading, cancelling and deleting jobs;
 * :mod:`.queue`: the queue protocol of the workers (claim, lease, fencing, the reaper);
@@ -7,8 +9,7 @@
 * :mod:`.workers`: the worker processes;
 * :mod:`.studies`: studies and their jobs.
 
-One code path for SQLite and PostgreSQL (the schema and the engine set-up are in
-``worker/db.py``). Times are epoch seconds from the database's clock (``db_now``).
+One code path for SQLite and PostgreSQL. Times are epoch seconds from the database's clock (``db_now``).
 """
 
 from __future__ import annotations
@@ -17,10 +18,20 @@ from .artifacts import CHECKPOINT_NAME, ArtifactQueries, content_type_for
 from .base import MAX_ID, Claim
 from .jobs import JobQueries
 from .queue import Beat, QueueProtocol
+from .schema import TERMINAL_STATUSES, QueueFull
 from .studies import StudyQueries
 from .workers import WorkerQueries
 
-__all__ = ["CHECKPOINT_NAME", "MAX_ID", "Beat", "Claim", "JobStore", "content_type_for"]
+__all__ = [
+    "CHECKPOINT_NAME",
+    "MAX_ID",
+    "TERMINAL_STATUSES",
+    "Beat",
+    "Claim",
+    "JobStore",
+    "QueueFull",
+    "content_type_for",
+]
 
 
 class JobStore(JobQueries, QueueProtocol, ArtifactQueries, WorkerQueries, StudyQueries):

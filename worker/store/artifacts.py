@@ -9,8 +9,8 @@ from typing import Any
 
 from sqlalchemy import Connection, LargeBinary, delete, func, insert, select, update
 
-from ..db import artifacts, db_now, jobs
 from .base import Claim, StoreBase, valid_id
+from .schema import artifacts, db_now, jobs
 
 CHECKPOINT_NAME = "checkpoint.pt"
 _READ_CHUNK = 1 << 20

@@ -11,7 +11,7 @@ from sqlalchemy import Connection, literal, select
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import IntegrityError, ProgrammingError
 
-from ..db import make_engine, metadata, migrate_sqlite
+from .schema import make_engine, metadata, migrate_sqlite
 
 #: A job id outside this range cannot exist (and would overflow a BIGINT bind parameter).
 MAX_ID = 2**63 - 1

@@ -6,9 +6,9 @@ from typing import Any
 
 from sqlalchemy import and_, delete, func, literal, select, update
 
-from ..db import artifacts, attempts, db_now, hold_queue, insert_job, jobs, metrics, study_jobs
 from .artifacts import drop_checkpoint
 from .base import StoreBase, valid_id
+from .schema import artifacts, attempts, db_now, hold_queue, insert_job, jobs, metrics, study_jobs
 
 #: Columns of a job shown in lists (the spec and the tracebacks are left to ``get_job``).
 _LIST_COLUMNS = [c for c in jobs.c if c.name not in ("spec", "summary", "error_detail")]

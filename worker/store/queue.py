@@ -21,10 +21,10 @@ from sqlalchemy import Connection, and_, delete, func, insert, or_, select, upda
 
 from modsat_core.artefacts import ProgressRecord
 
-from ..db import TERMINAL_STATUSES, artifacts, attempts, db_now, jobs, metrics
 from ..jsonsafe import to_json
 from .artifacts import CHECKPOINT_NAME, drop_checkpoint, put_artifact
 from .base import Claim, StoreBase
+from .schema import TERMINAL_STATUSES, artifacts, attempts, db_now, jobs, metrics
 
 
 class _Fenced(Exception):

@@ -7,8 +7,8 @@ from typing import Any
 
 from sqlalchemy import func, insert, select
 
-from ..db import db_now, hold_queue, insert_job, jobs, studies, study_jobs
 from .base import StoreBase, valid_id
+from .schema import db_now, hold_queue, insert_job, jobs, studies, study_jobs
 
 #: What a study shows of each of its jobs.
 _JOB_COLUMNS = [
@@ -39,7 +39,7 @@ class StudyQueries(StoreBase):
     ) -> tuple[int, list[int]]:
         """Create a study and queue its jobs, all or nothing. ``job_specs``: (algorithm, seed,
         spec JSON, total env steps) per job. Returns (study id, job ids). With ``max_active``,
-        raises :class:`~worker.db.QueueFull` when its jobs do not all fit in the queue."""
+        raises :class:`~worker.store.QueueFull` when its jobs do not all fit in the queue."""
         with self._write() as conn:
             hold_queue(conn, len(job_specs), max_active)
             sid = int(

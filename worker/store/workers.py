@@ -6,8 +6,8 @@ from typing import Any
 
 from sqlalchemy import insert, select, update
 
-from ..db import db_now, workers
 from .base import StoreBase
+from .schema import db_now, workers
 
 
 class WorkerQueries(StoreBase):

@@ -5,12 +5,10 @@ and the curves of modsat_core.evaluation.study_report) and the figure as it fill
 from __future__ import annotations
 
 import json
-from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 from fastapi import APIRouter, HTTPException, Query, Request, Response
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from modsat_core.artefacts import ArtefactError, CurveFile, CurvePoint
@@ -19,85 +17,21 @@ from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, sav
 from modsat_core.spec.jobspec import JobSpec, SpecError
 from modsat_core.spec.limits import check as check_limits
 from modsat_core.spec.study import (
-    ALGORITHMS,
     DEFAULT_ALGORITHMS,
-    MAX_SEEDS,
     algorithm_problem,
     ga_problem,
     seed_problem,
     study_specs,
 )
-from worker.db import QueueFull
+from worker.store import QueueFull
 
-from .deps import SettingsDep, StoreDep, WriteAccess
-from .schemas import Digits, JobStatus, StudyId, _time
-from .submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
+from ..deps import SettingsDep, StoreDep, WriteAccess
+from ..schemas import Digits, StudyDetail, StudyId, StudyJob, StudyList, StudySummary, _time
+from ..submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
 
 _ERRORS: dict[int | str, dict[str, Any]] = {404: {"description": "Unknown study"}}
-
-
-class StudySubmission(BaseModel):
-    """A study: ``spec`` (a JobSpec, or ``{"preset": NAME, "overrides": {...}}``) flown once per
-    seed and algorithm; every job is the spec with its own ``seed`` and ``algorithm``."""
-
-    spec: dict[str, Any] = Field(description='A JobSpec, or {"preset": NAME, "overrides": {...}}.')
-    seeds: list[Annotated[int, Field(ge=0, lt=2**31)]] = Field(
-        min_length=1,
-        max_length=MAX_SEEDS,
-        description=f"1 to {MAX_SEEDS} distinct seeds.",
-        examples=[[0, 1, 2]],
-        json_schema_extra={"uniqueItems": True},
-    )
-    algorithms: list[Literal[ALGORITHMS]] = Field(  # type: ignore[valid-type]
-        default=list(DEFAULT_ALGORITHMS),
-        min_length=1,
-        description="RL co-design and/or its GA twin (or the controllers of a fixed design); distinct.",
-        json_schema_extra={"uniqueItems": True},
-    )
-
-
-class StudyJob(BaseModel):
-    id: int
-    url: str
-    algorithm: str
-    seed: int
-    status: JobStatus
-    env_steps: int
-    total_env_steps: int
-    run_seconds: float
-    last_eval: CurvePoint | None
-    error: str | None
-
-
-class StudySummary(BaseModel):
-    id: int
-    name: str | None
-    seeds: list[int]
-    algorithms: list[str]
-    created_at: datetime
-    counts: dict[str, int] = Field(description="Its jobs per status.")
-    url: str
-
-
-class StudyList(BaseModel):
-    total: int
-    limit: int
-    offset: int
-    items: list[StudySummary]
-
-
-class StudyDetail(StudySummary):
-    spec: JobSpec
-    status: Literal["queued", "running", "ended"] = Field(description="`ended` once every job has ended.")
-    jobs: list[StudyJob]
-    aggregate: dict[str, Any] = Field(
-        description="Per method: final Monte-Carlo figures of its finished runs (mean, std, n over seeds), PD on "
-        "their designs, the designs' symmetry numbers, and the learning curves (mean and std over seeds)."
-    )
-    table_markdown: str
-    figure_url: str
 
 
 def _unknown(study_id: int) -> HTTPException:

@@ -14,10 +14,10 @@ from fastapi.responses import JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from modsat_core.spec.limits import check as check_limits
-from worker.db import TERMINAL_STATUSES, QueueFull
+from worker.store import TERMINAL_STATUSES, QueueFull
 
-from .deps import SettingsDep, StoreDep, WriteAccess
-from .schemas import (
+from ..deps import SettingsDep, StoreDep, WriteAccess
+from ..schemas import (
     ArtifactInfo,
     CancelResult,
     Digits,
@@ -32,7 +32,7 @@ from .schemas import (
     job_summary,
     metrics_point,
 )
-from .submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
+from ..submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 

@@ -1,4 +1,4 @@
-"""The 3D viewer in the API process, and the web UI's static files.
+"""What the API process serves besides the API: the live 3D viewer, viser's client and the page.
 
 * The live viewer (web.live) runs in the app's lifespan, in viser's own threads,
   on ``viewer_port`` (its real port: ``GET /api/viewer``). Its runs are the job store's
@@ -15,9 +15,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from fastapi import APIRouter, FastAPI, Request
+from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, Field
 
 import web
 from modsat_core.evaluation.run_folder import RunFolder
@@ -83,33 +82,6 @@ def start_viewer(settings: ServerSettings, store):
         return None
     log.info("modsat: 3D viewer on port %d", app.port)
     return app
-
-
-class ViewerInfo(BaseModel):
-    enabled: bool = Field(description="Whether the live viewer runs in this server.")
-    port: int | None = Field(description="The port it really listens on (same host as the API).")
-    client: str = Field(description="Path of viser's static client on this server (live and recordings).")
-    recording: str = Field(description="Artefact name of a finished job's .viser recording.")
-
-
-def viewer_router() -> APIRouter:
-    r = APIRouter(prefix="/api")
-
-    @r.get("/viewer", response_model=ViewerInfo, tags=["service"])
-    def viewer_info(request: Request) -> ViewerInfo:
-        """Where the live 3D viewer listens. Open `/viser-client/?websocket=ws://HOST:PORT/?run=JOB_ID`
-        (or `http://HOST:PORT/`); a recording plays at `/viser-client/?playbackPath=URL`."""
-        from web.recording import RECORDING_NAME
-
-        v = getattr(request.app.state, "viewer", None)
-        return ViewerInfo(
-            enabled=v is not None,
-            port=v.port if v is not None else None,
-            client="/viser-client/",
-            recording=RECORDING_NAME,
-        )
-
-    return r
 
 
 def mount_static(app: FastAPI, settings: ServerSettings) -> None:
