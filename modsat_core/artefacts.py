@@ -8,7 +8,7 @@ One owner for the formats of
 * the short evaluation summary of a finished run (the API's ``evaluation`` of a job).
 
 The writers (modsat_core.evaluation.run_files, td3_run, ga), the job store, the API models, the viewer
-(web.run) and the tests build and read them through these models (docs/learning.md,
+(web.viewer.run) and the tests build and read them through these models (docs/learning.md,
 "Outputs of a run", lists the files). A record keeps the keys it was given, in their order,
 and only those: an optional key a writer left out is absent from the file and from the API,
 not ``null``; unknown keys (e.g. success at a mission tolerance other than 0.25 and 1 deg, or a custom

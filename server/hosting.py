@@ -1,6 +1,6 @@
 """What the API process serves besides the API: the live 3D viewer, viser's client and the page.
 
-* The live viewer (web.live) runs in the app's lifespan, in viser's own threads,
+* The live viewer (web.viewer.live) runs in the app's lifespan, in viser's own threads,
   on ``viewer_port`` (its real port: ``GET /api/viewer``). Its runs are the job store's
   succeeded jobs (:class:`StoreRuns`).
 * ``/viser-client/`` serves viser's static client (one self-contained HTML file from the
@@ -20,7 +20,7 @@ from fastapi.staticfiles import StaticFiles
 
 import web
 from modsat_core.evaluation.run_folder import RunFolder
-from web.run import RunData, learner_label
+from web.viewer.run import RunData, learner_label
 
 from .settings import ServerSettings
 
@@ -71,7 +71,7 @@ def start_viewer(settings: ServerSettings, store):
     """The live viewer on ``settings.viewer_port``, or None when it is disabled or cannot start."""
     if not settings.viewer:
         return None
-    from web.live import ViewerApp
+    from web.viewer.live import ViewerApp
 
     try:
         app = ViewerApp(

@@ -11,8 +11,8 @@ service would take such a request for the user's own. So, for HTTP and websocket
   this server's own origin or one listed in ``MODSAT_ALLOWED_ORIGINS``: a foreign
   ``Origin``, or ``Sec-Fetch-Site: cross-site``, is 403. Clients that are not browsers
   (curl, scripts) send neither header and are not affected.
-* Websockets (the API has none; the viewer's are checked in web/live/guard.py with the
-  same rules, web/origin.py) must come from a page on an allowed host.
+* Websockets (the API has none; the viewer's are checked in web/viewer/live/guard.py with the
+  same rules, web/viewer/origin.py) must come from a page on an allowed host.
 
 Submissions must also be ``application/json`` (415), see routers/jobs.py.
 
@@ -28,7 +28,7 @@ from __future__ import annotations
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from web.origin import host_allowed, origin_allowed
+from web.viewer.origin import host_allowed, origin_allowed
 
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 #: Framing headers of every answer, and of viser's client (the page frames it; nobody else may).

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pydantic import Field, SecretStr, field_validator
 
-from web.origin import host_names
+from web.viewer.origin import host_names
 from worker.settings import WorkerSettings
 
 

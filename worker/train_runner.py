@@ -1,5 +1,5 @@
 """The default runner, ``train``: :func:`modsat_core.training.train.train`, and for a finished run the
-``evaluation.viser`` recording of its evaluation slews (web.recording), made from
+``evaluation.viser`` recording of its evaluation slews (web.viewer.recording), made from
 the run's own ``design.json`` and ``trajectories.json`` in the training child process, and,
 where the spec asks (``evaluation.basilisk``), ``verification.json`` (modsat_core.verify.run).
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 from modsat_core.training.checkpoint import RunResult, checkpoint_from_bytes, checkpoint_to_bytes  # noqa: F401 - the runner's codec
 from modsat_core.training.train import train as _train
 from modsat_core.verify.run import add_verification
-from web.recording import add_recording
+from web.viewer.recording import add_recording
 
 
 def train(spec, *, on_progress=None, on_checkpoint=None, should_stop=None, checkpoint=None) -> RunResult:

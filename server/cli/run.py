@@ -155,7 +155,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         )
         return 130
     from modsat_core.verify.run import add_verification
-    from web.recording import (
+    from web.viewer.recording import (
         add_recording,  # the 3D replay, evaluation.viser (docs/viewer.md)
     )
 

@@ -199,7 +199,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
     """``modsat view RUN_DIR [RUN_DIR ...]``: the live viewer on local runs, until Ctrl-C."""
     from pathlib import Path
 
-    from web.live import DirRuns, ViewerApp
+    from web.viewer.live import DirRuns, ViewerApp
 
     try:
         source = DirRuns(args.run_dirs)
@@ -208,7 +208,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
         return 2
     if args.save:
         from modsat_core.evaluation.run_folder import RunFolder
-        from web.recording import recording_bytes, recording_html
+        from web.viewer.recording import recording_bytes, recording_html
 
         run = RunFolder(args.run_dirs[0])  # DirRuns has read it: design and trajectories are there
         data = recording_bytes(

@@ -15,7 +15,7 @@ def viewer_router() -> APIRouter:
     def viewer_info(request: Request) -> ViewerInfo:
         """Where the live 3D viewer listens. Open `/viser-client/?websocket=ws://HOST:PORT/?run=JOB_ID`
         (or `http://HOST:PORT/`); a recording plays at `/viser-client/?playbackPath=URL`."""
-        from web.recording import RECORDING_NAME
+        from web.viewer.recording import RECORDING_NAME
 
         v = getattr(request.app.state, "viewer", None)
         return ViewerInfo(

@@ -162,7 +162,7 @@ def test_validating_a_spec_and_drawing_the_scene_load_no_torch():
     code = (
         "import sys\n"
         "import modsat_core.spec.jobspec as s\n"
-        "import web.scene, web.run, web.recording\n"
+        "import web.viewer.scene, web.viewer.run, web.viewer.recording\n"
         "grid = [[[0, 0], [0, 0]], [[1, 2], [0, 0]]]\n"
         "spec = s.parse_spec({'algorithm': 'td3-control', 'design': {'grid_size': 2, 'fixed_design': grid}})\n"
         "assert spec.design.fixed_design == grid\n"

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from modsat_core.artefacts import ArtefactError, DesignReport, Trajectories
-from web.recording import RECORDING_NAME, add_recording, recording_bytes, recording_html
-from web.run import Episode, RunData
-from web.scene import ACTUATOR_SRGB, Voxels, side_by_side_positions, srgb_to_linear
+from web.viewer.recording import RECORDING_NAME, add_recording, recording_bytes, recording_html
+from web.viewer.run import Episode, RunData
+from web.viewer.scene import ACTUATOR_SRGB, Voxels, side_by_side_positions, srgb_to_linear
 
 GRID = [[[1, 2, 0], [0, 1, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, 0], [0, 0, 0]]]
 
@@ -126,7 +126,7 @@ def test_recording_is_a_viser_file_of_the_slews():
 
 def test_live_viewer_sessions(tmp_path):
     """Sessions built as for a browser tab (viser's ClientHandle API), driven from Python."""
-    from web.live import DirRuns, Session, ViewerApp
+    from web.viewer.live import DirRuns, Session, ViewerApp
 
     for name in ("a", "b"):
         d = tmp_path / name
@@ -195,8 +195,8 @@ def test_live_viewer_refuses_other_sites_at_the_handshake(tmp_path, caplog):
     real browser)."""
     import logging
 
-    from web.live import DirRuns, ViewerApp
-    from web.origin import host_names, origin_allowed
+    from web.viewer.live import DirRuns, ViewerApp
+    from web.viewer.origin import host_names, origin_allowed
 
     d = tmp_path / "a"
     d.mkdir()

@@ -37,7 +37,7 @@ CHROMIUM_FLAGS = [
 DESKTOP = {"width": 1280, "height": 800}
 PHONE = {"width": 390, "height": 844}
 
-#: The `quick` preset's actuator colour (web.scene.ACTUATOR_SRGB), as an HSV test below.
+#: The `quick` preset's actuator colour (web.viewer.scene.ACTUATOR_SRGB), as an HSV test below.
 ACTUATOR_HUE_DEG = (15.0, 45.0)
 
 

@@ -35,7 +35,7 @@ function el(tag, attrs, ...children) {
   return e;
 }
 
-// How a run's learner is named beside the viewer (web/run.py's learner_label says the same).
+// How a run's learner is named beside the viewer (web/viewer/run.py's learner_label says the same).
 function shortAlgorithm(a) {
   if (a === "ga") return "GA";
   if (a.startsWith("td3")) return "RL";

@@ -109,7 +109,7 @@ function lineChart(series, opts) {
 // cube still shows in its orange through one pane (the 3D view does the same).
 const THUMB_COLORS = {
   1: ["#c9ced6", "#a7aeb9", "#8c94a1"],  // structure: top, +x, +y faces
-  2: ["#ffa54f", "#ff7f0e", "#d9650a"],  // actuator (web.scene's orange)
+  2: ["#ffa54f", "#ff7f0e", "#d9650a"],  // actuator (web.viewer.scene's orange)
 };
 
 function designThumb(grid, opts) {

@@ -1,5 +1,5 @@
 """The viewer's port answers only the pages it should: every request (viser's page, or the
-websocket's upgrade) is checked against the allowed host names (web/origin.py) before viser
+websocket's upgrade) is checked against the allowed host names (web/viewer/origin.py) before viser
 sees it, so a refused websocket never gets a session or a message of the scene
 (docs/service.md, "The viewer's port")."""
 
