@@ -7,7 +7,8 @@ Imported only in the training child (it loads torch)."""
 
 from __future__ import annotations
 
-from modsat_core.training.checkpoint import RunResult, checkpoint_from_bytes, checkpoint_to_bytes  # noqa: F401 - the runner's codec
+from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes  # noqa: F401 - the runner's codec
+from modsat_core.training.result import RunResult
 from modsat_core.training.train import train as _train
 from modsat_core.verify.run import add_verification
 from web.viewer.recording import add_recording

@@ -105,7 +105,7 @@ def diffsim_row(design: str, spec: JobSpec) -> tuple[dict, dict]:
 
 def td3_row(design: str, spec: JobSpec, wall_s: float, pd: dict) -> dict:
     """A TD3 row of ``spec`` trained for ``wall_s`` seconds (flat MLP, `modsat bench control`)."""
-    from modsat_core.training.td3_control import bench_control
+    from modsat_core.bench.control import bench_control
 
     out = bench_control(spec, eval_every=10**9, max_wall_s=wall_s)  # evaluated once, at the end
     row = _row("td3", design, spec.seed, out["train_s"], out["best"], pd)

@@ -53,7 +53,7 @@ BASE_BYTES = 600 * 2**20
 GIB = 2**30
 
 
-#: The compact replay row, one table for the buffer (``training.checkpoint.replay_fields`` makes
+#: The compact replay row, one table for the buffer (``training.replay_layout.replay_fields`` makes
 #: torch dtypes of the names) and for the memory estimate here: name, shape ("C" is the number
 #: of cells, N^3), dtype. A state: the grid (a type per cell), the design step, q_BN, q_TN, the
 #: body rate and each cell's wheel momentum; a row holds two states, "obs_" and "next_".

@@ -1,45 +1,26 @@
-"""The run contract's pieces: callbacks, the result, checkpoints and the replay layout.
-
-What :func:`modsat_core.training.train.train` takes and gives back (docs/train-interface.md), the
-checkpoint codec, and the replay buffer's fields (the compact row of
-:func:`modsat_core.spec.limits.replay_layout`, one table for the buffer and the memory limits).
+"""Checkpoints: their codec (bytes that ``torch.load(weights_only=True)`` reads, old files
+included), their version, the size up to which a replay buffer goes into one, and moving a run's
+state to the CPU for one and back to its device on resume (docs/train-interface.md).
 """
 
 from __future__ import annotations
 
 import io
-import math
-from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
 from modsat_core.agent.policy_file import load_plain
-from modsat_core.spec.jobspec import UnrunnableSpec
-from modsat_core.spec.limits import replay_layout
 
 try:
     from numpy._core import multiarray as np_multiarray  # numpy 2
 except ImportError:  # numpy 1
     from numpy.core import multiarray as np_multiarray  # type: ignore[no-redef]
 
-ProgressFn = Callable[[dict], None]
-CheckpointFn = Callable[[dict], None]
-StopFn = Callable[[], bool]
-
 #: The replay buffer goes into checkpoints only up to this size (bigger buffers are refilled
 #: after a resume: learning restarts after ``learning_starts`` fresh transitions).
 CHECKPOINT_BUFFER_LIMIT_BYTES = 256 * 2**20
 CHECKPOINT_VERSION = 2
-
-
-def resolve_device(name: str) -> str:
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cuda" and not torch.cuda.is_available():
-        raise UnrunnableSpec("training.device is 'cuda' but torch sees no GPU on this machine; use 'auto' or 'cpu'")
-    return name
 
 
 def checkpoint_to_bytes(ckpt: dict) -> bytes:
@@ -92,33 +73,6 @@ def _plain(x):
         return v.item() if isinstance(v, np.generic) else v
 
     return _map_leaves(x, leaf)
-
-
-def replay_fields(N: int) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
-    """The replay buffer's fields on an N^3 grid: the compact row of
-    :func:`modsat_core.spec.limits.replay_layout` (the table the memory limits read), in torch dtypes."""
-    return {name: (shape, getattr(torch, dt)) for name, (shape, dt) in replay_layout(N).items()}
-
-
-def replay_buffer_bytes(N: int, capacity: int) -> int:
-    """Memory of a full replay buffer of ``capacity`` transitions on an N^3 grid."""
-    return capacity * sum(
-        math.prod(shape) * torch.empty((), dtype=dt).element_size() for shape, dt in replay_fields(N).values()
-    )
-
-
-@dataclass
-class RunResult:
-    """What :func:`train` returns. ``artifacts()`` is empty for a stopped run."""
-
-    stopped: bool
-    env_steps: int
-    curve: list[dict] = field(default_factory=list)
-    files: dict[str, bytes] = field(default_factory=dict)
-    summary: dict = field(default_factory=dict)
-
-    def artifacts(self) -> dict[str, bytes]:
-        return dict(self.files)
 
 
 def to_cpu(x):

@@ -52,7 +52,8 @@ from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim, slot_masks
 from modsat_core.spec.diffsim import Diffsim
 from modsat_core.spec.jobspec import JobSpec, Mission
-from modsat_core.training.checkpoint import CheckpointFn, ProgressFn, StopFn, to_cpu
+from modsat_core.training.callbacks import CheckpointFn, ProgressFn, StopFn
+from modsat_core.training.checkpoint import to_cpu
 
 
 def training_mission(mission: Mission, substeps: int | None) -> Mission:

@@ -34,9 +34,10 @@ from modsat_core.artefacts import CurvePoint, ProgressRecord
 from modsat_core.evaluation.run_files import run_files
 from modsat_core.grid import is_valid, random_design
 from modsat_core.spec.jobspec import GA, JobSpec, Training, is_diffsim
-from modsat_core.training.checkpoint import CHECKPOINT_VERSION, RunResult
+from modsat_core.training.checkpoint import CHECKPOINT_VERSION
 from modsat_core.training.diffsim import DiffsimRun
 from modsat_core.training.diffsim_codesign import fixed_cells, satellites, score_designs
+from modsat_core.training.result import RunResult
 from modsat_core.training.td3_trainer import TD3Run
 
 MAX_DRAWS = 100_000

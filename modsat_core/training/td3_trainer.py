@@ -24,15 +24,9 @@ from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.limits import replay_capacity
-from modsat_core.training.checkpoint import (
-    CHECKPOINT_BUFFER_LIMIT_BYTES,
-    CheckpointFn,
-    ProgressFn,
-    StopFn,
-    replay_fields,
-    to_cpu,
-    to_device,
-)
+from modsat_core.training.callbacks import CheckpointFn, ProgressFn, StopFn
+from modsat_core.training.checkpoint import CHECKPOINT_BUFFER_LIMIT_BYTES, to_cpu, to_device
+from modsat_core.training.replay_layout import replay_fields
 
 
 class TD3Run:

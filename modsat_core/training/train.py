@@ -1,4 +1,13 @@
-"""Training runs: TD3 co-design, TD3 control of a fixed design, and the GA baseline.
+"""Training runs: ``train()`` dispatches the spec's ``algorithm`` to one of five learners:
+
+- ``td3-codesign``: TD3 co-design of the shape and its controller (:class:`TD3Run`);
+- ``td3-control``: TD3 control of a fixed design (:class:`TD3Run` without its design phase);
+- ``ga``: the genetic-algorithm baseline, a TD3 controller per design (:class:`GARun`);
+- ``diffsim-control``: the first-order learner, backpropagation through the simulator
+  (:class:`DiffsimRun`);
+- ``diffsim-codesign``: the first-order learner with a learned design distribution
+  (:class:`DiffsimCodesignRun`), or its trade-off front when the objective prices mass
+  (:class:`ParetoRun`).
 
 ``train(spec, ...)`` is the one entry point (the worker and the CLI call it); its contract
 is written in docs/train-interface.md. It does no I/O and never reads the clock: progress,
@@ -13,23 +22,28 @@ that would), so it may end up to ``num_envs - 1`` steps short of it.
 
 from __future__ import annotations
 
+import torch
+
 from modsat_core.artefacts import ProgressRecord
 from modsat_core.evaluation.run_files import run_files
-from modsat_core.spec.jobspec import JobSpec, is_diffsim
-from modsat_core.training.checkpoint import (
-    CHECKPOINT_VERSION,
-    CheckpointFn,
-    ProgressFn,
-    RunResult,
-    StopFn,
-    resolve_device,
-    to_device,
-)
+from modsat_core.spec.jobspec import JobSpec, UnrunnableSpec, is_diffsim
+from modsat_core.training.callbacks import CheckpointFn, ProgressFn, StopFn
+from modsat_core.training.checkpoint import CHECKPOINT_VERSION, to_device
 from modsat_core.training.diffsim import DiffsimRun
 from modsat_core.training.diffsim_codesign import DiffsimCodesignRun
 from modsat_core.training.diffsim_pareto import ParetoRun
 from modsat_core.training.ga import GARun
+from modsat_core.training.result import RunResult
 from modsat_core.training.td3_trainer import TD3Run
+
+
+def resolve_device(name: str) -> str:
+    """The torch device of ``training.device``: ``auto`` is cuda where torch sees a GPU, else cpu."""
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise UnrunnableSpec("training.device is 'cuda' but torch sees no GPU on this machine; use 'auto' or 'cpu'")
+    return name
 
 
 def _noop(*_a, **_k):

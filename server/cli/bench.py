@@ -68,7 +68,7 @@ def _cmd_bench_update(args: argparse.Namespace) -> int:
 
 def _cmd_bench_learning(args: argparse.Namespace) -> int:
     set_threads(None)
-    from modsat_core.bench.learning import bench_learn, bench_rl_vs_ga
+    from modsat_core.bench.training_runs import bench_learn, bench_rl_vs_ga
 
     spec = load_spec(args)
     if args.out:  # before hours of training, not after
@@ -85,7 +85,7 @@ def _cmd_bench_learning(args: argparse.Namespace) -> int:
 
 def _cmd_bench_control(args: argparse.Namespace) -> int:
     set_threads(None)
-    from modsat_core.training.td3_control import bench_control
+    from modsat_core.bench.control import bench_control
 
     if args.eval_every < 1:
         raise SystemExit("modsat bench control: --eval-every must be at least 1")

@@ -23,7 +23,7 @@ def _spec(**sections):
 def test_constants_agree_with_the_code():
     from modsat_core.agent.networks import SET_CELL_WIDTH
     from modsat_core.codesign.features import N_FEATURES
-    from modsat_core.training.checkpoint import replay_buffer_bytes
+    from modsat_core.training.replay_layout import replay_buffer_bytes
 
     assert limits.N_FEATURES == N_FEATURES and limits.SET_CELL_WIDTH == SET_CELL_WIDTH
     for n in (2, 3, 5, 10):  # the buffer is built from the same table: this checks the dtypes' sizes

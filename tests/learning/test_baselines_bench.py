@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from modsat_core.bench.learning import bench_learn, bench_rl_vs_ga, ga_spec_like
+from modsat_core.bench.training_runs import bench_learn, bench_rl_vs_ga, ga_spec_like
 from modsat_core.codesign.mdp import effective_invalid_penalty
 from modsat_core.grid import is_valid
 from server.cli import main

@@ -10,12 +10,12 @@ import torch
 
 from modsat_core.agent.flat_networks import FlatCellActor, FlatCellCritic, flat_observation
 from modsat_core.agent.policy import PolicyController
+from modsat_core.bench.control import bench_control
 from modsat_core.codesign.features import control_globals
 from modsat_core.grid import ACTUATOR
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.slew import Design, SlewSim
-from modsat_core.training.td3_control import bench_control
 from modsat_core.training.td3_trainer import TD3Run
 from server.cli import main
 

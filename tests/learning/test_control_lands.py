@@ -32,10 +32,10 @@ from __future__ import annotations
 
 import pytest
 
+from modsat_core.bench.control import bench_control
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.spec.jobspec import parse_spec
 from modsat_core.spec.presets import get_preset
-from modsat_core.training.td3_control import bench_control
 
 pytestmark = pytest.mark.slow  # trains a controller for 20k env steps (5-8 minutes on 2 busy cores)
 

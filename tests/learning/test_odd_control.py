@@ -9,10 +9,10 @@ import torch
 from modsat_core.agent.flat_networks import MLPActor
 from modsat_core.agent.networks import NETWORKS, make_actor
 from modsat_core.agent.policy_file import load_policy, new_actor, policy_bytes
+from modsat_core.bench.control import bench_control
 from modsat_core.codesign.features import N_FEATURES, PhysState, cell_observation, control_globals, mirror_control
 from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.quaternion import canonical, normalize
-from modsat_core.training.td3_control import bench_control
 from modsat_core.training.train import train
 
 from .conftest import first_checkpoint, tiny_spec

@@ -13,12 +13,8 @@ from modsat_core.agent.policy_file import load_policy
 from modsat_core.agent.td3 import ReplayBuffer
 from modsat_core.grid import is_valid
 from modsat_core.spec.evaluation import STANDARD_CONDITIONS
-from modsat_core.training.checkpoint import (
-    checkpoint_from_bytes,
-    checkpoint_to_bytes,
-    replay_buffer_bytes,
-    replay_fields,
-)
+from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
+from modsat_core.training.replay_layout import replay_buffer_bytes, replay_fields
 from modsat_core.training.train import train
 
 from .conftest import first_checkpoint, tiny_spec
