@@ -61,6 +61,9 @@ MIN_DRAWS = 4
 #: A front point is flight-ready when it lands at least this share of the slews nominally and under each
 #: flight condition (those the requirements judge, where there are requirements).
 FLIGHT_READY_SHARE = 0.99
+#: Most points of the run's archive (the non-dominated draws) that join the final candidates, spread
+#: over its range of mass.
+ARCHIVE_CANDIDATES = 16
 
 
 def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[list[dict]]:
@@ -167,6 +170,9 @@ class ParetoRun(DiffsimRun):
         self.records: list[dict] = []
         self.best: list[list[dict]] = [[] for _ in range(L)]  # per price: {"grid", "objective_s"}, best first
         self.front: list[dict] = []
+        #: The non-dominated draws of the whole run over (mass, median settling on their design slews),
+        #: among those that landed every slew: {"grid", "mass_kg", "settling_s", "price"}, lightest first.
+        self.archive: list[dict] = []
         super().__init__(spec, device)
 
     # ------------------------------------------------------------------ the distributions
@@ -214,6 +220,7 @@ class ParetoRun(DiffsimRun):
         episode_s = self.spec.mission.episode_steps * self.spec.mission.control_dt_s
         flown = fly(self.spec, policy, grids, self.d.design_slews, seed, exact=False)
         times = [mean_time_s(e, episode_s) for e in flown]
+        self.update_archive(grids, flown, [self.prices[i // M] for i in range(len(grids))], episode_s)
         self.design_opt.zero_grad(set_to_none=True)
         loss = torch.zeros((), dtype=torch.float64)
         record: dict[str, Any] = {"updates": self.updates, "env_steps": self.env_steps, "prices": []}
@@ -248,6 +255,22 @@ class ParetoRun(DiffsimRun):
         self.active = (start, len(self.pool))
         self.records.append(record)
 
+    def update_archive(self, grids: list[np.ndarray], flown: list[list[dict]], prices: list[float], episode_s: float) -> None:
+        """Add the draws that landed every slew to the archive and keep its non-dominated set."""
+        pts = list(self.archive)
+        for g, eps, price in zip(grids, flown, prices, strict=True):
+            if eps and all(e["success"] for e in eps) and not any(np.array_equal(g, p["grid"]) for p in pts):
+                pts.append(
+                    {
+                        "grid": np.asarray(g, dtype=np.int64),
+                        "mass_kg": design_mass_kg(g, self.spec.modules),
+                        "settling_s": median_settling_s(eps, episode_s),
+                        "price": price,
+                    }
+                )
+        keep = nondominated(np.asarray([[p["mass_kg"], p["settling_s"]] for p in pts]))
+        self.archive = sorted([p for p, k in zip(pts, keep, strict=True) if k], key=lambda p: p["mass_kg"])
+
     def update(self) -> dict[str, float]:
         out = super().update()
         if self.updates % self.d.design_every == 0:
@@ -256,12 +279,17 @@ class ParetoRun(DiffsimRun):
 
     # ------------------------------------------------------------------ the front
     def candidates(self) -> list[tuple[np.ndarray, float]]:
-        """Each distribution's mode and best draws, once each, with the price they came from."""
+        """Each distribution's mode and best draws, then up to :data:`ARCHIVE_CANDIDATES` points of the
+        archive spread over its mass range, once each, with the price they came from."""
+        picked = self.archive
+        if len(picked) > ARCHIVE_CANDIDATES:
+            idx = np.unique(np.round(np.linspace(0, len(picked) - 1, ARCHIVE_CANDIDATES)).astype(int))
+            picked = [picked[i] for i in idx]
         out: list[tuple[np.ndarray, float]] = []
-        for l, price in enumerate(self.prices):
-            for g in [self.mode(l), *[b["grid"] for b in self.best[l]]]:
-                if (g >= ACTUATOR).any() and not any(np.array_equal(g, u) for u, _ in out):
-                    out.append((g, price))
+        found = [(g, price) for l, price in enumerate(self.prices) for g in [self.mode(l), *[b["grid"] for b in self.best[l]]]]
+        for g, price in found + [(p["grid"], p["price"]) for p in picked]:
+            if (g >= ACTUATOR).any() and not any(np.array_equal(g, u) for u, _ in out):
+                out.append((g, price))
         return out
 
     def trade_off(self, policy: torch.nn.Module) -> tuple[list[dict], list[dict]]:
@@ -364,11 +392,14 @@ class ParetoRun(DiffsimRun):
     def state_dict(self) -> dict:
         d = super().state_dict()
         d["pareto"] = design_state(self, [best_to_state(b) for b in self.best])
+        d["pareto"]["archive"] = [{**p, "grid": p["grid"].tolist()} for p in self.archive]
         return d
 
     def load_state_dict(self, d: dict) -> None:
         c = d["pareto"]
         load_design_state(self, c)
         self.best = [best_from_state(b) for b in c["best"]]
+        # checkpoints written before the archive have none
+        self.archive = [{**p, "grid": np.asarray(p["grid"], dtype=np.int64)} for p in c.get("archive", [])]
         super().load_state_dict(d)
         self.grid = np.asarray(c["grid"], dtype=np.int64)

@@ -110,6 +110,35 @@ def test_a_trade_off_run_returns_its_front_keeps_the_lightest_that_meets_and_res
     assert resumed.artifacts()["curve.json"] == files["curve.json"]
 
 
+def test_the_archive_keeps_the_non_dominated_draws_that_landed_and_feeds_the_candidates():
+    # slews small enough that the draws land before the controller has learned anything
+    run = ParetoRun(tiny_trade_off(mission__slew_min_deg=1.0, mission__slew_max_deg=2.0))
+    seen: list[dict] = []
+    update_archive = run.update_archive
+
+    def spy(grids, flown, prices, episode_s):
+        seen.extend(
+            {"grid": g, "landed": bool(eps) and all(e["success"] for e in eps)}
+            for g, eps in zip(grids, flown, strict=True)
+        )
+        update_archive(grids, flown, prices, episode_s)
+
+    run.update_archive = spy
+    for _ in range(8):
+        run.update()
+    assert len(seen) == 4 * 2 * 4  # 4 design updates, 2 prices, 4 draws each
+    assert run.archive, "no draw landed every slew: the tiny mission is too hard to test the archive"
+    pts = np.asarray([[p["mass_kg"], p["settling_s"]] for p in run.archive])
+    assert nondominated(pts).all() and list(pts[:, 0]) == sorted(pts[:, 0])
+    for p in run.archive:  # each point is a draw that landed every slew, priced by its distribution
+        assert any(s["landed"] and np.array_equal(s["grid"], p["grid"]) for s in seen)
+        assert p["price"] in run.prices
+    cands = run.candidates()
+    assert all(any(np.array_equal(p["grid"], g) for g, _ in cands) for p in run.archive)
+    grids = [g.tobytes() for g, _ in cands]
+    assert len(set(grids)) == len(grids)
+
+
 def test_the_fronts_arithmetic():
     pts = np.asarray([[1.0, 5.0], [2.0, 3.0], [3.0, 4.0], [4.0, 1.0]])
     assert nondominated(pts).tolist() == [True, True, False, True]
