@@ -5,7 +5,8 @@ Two body forms (docs/service.md):
 * a whole JobSpec, e.g. ``{"algorithm": "td3-codesign", "training": {...}, ...}``;
 * a preset with overrides, e.g. ``{"preset": "quick", "overrides": {"seed": 3}}``. The
   overrides are merged into the preset field by field (nested objects merge, anything
-  else replaces), and the result is validated like a whole spec.
+  else replaces), and the result is validated like a whole spec
+  (:func:`modsat_core.spec.overrides.with_overrides`, which ``modsat train --preset`` uses too).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from fastapi import HTTPException
 from fastapi.responses import JSONResponse
 
 from modsat_core.spec.jobspec import JobSpec, SpecError, parse_spec
+from modsat_core.spec.overrides import with_overrides
 from modsat_core.spec.presets import PRESETS
 
 log = logging.getLogger("modsat.server")
@@ -38,14 +40,6 @@ class Invalid(Exception):
 
 def _error(loc: list[Any], msg: str, kind: str = "value_error") -> dict[str, Any]:
     return {"loc": ["body", *loc], "msg": msg, "type": kind}
-
-
-def merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
-    """``base`` with ``overrides`` applied: nested dicts merge, other values replace."""
-    out = dict(base)
-    for k, v in overrides.items():
-        out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
 
 
 def json_content_type(content_type: str | None) -> None:
@@ -142,10 +136,9 @@ def spec_from_body(body: Any) -> JobSpec:
             raise Invalid(
                 [_error(["overrides"], 'overrides: expected an object of spec fields, e.g. {"seed": 3}', "dict_type")]
             )
-        body = merge(PRESETS[name].model_dump(mode="json"), overrides)
         prefix = ["overrides"]
     try:
-        spec = parse_spec(body)
+        spec = with_overrides(PRESETS[name], overrides) if prefix else parse_spec(body)
     except SpecError as exc:
         locs = [list(e.get("loc", ())) for e in exc.errors] or [[] for _ in exc.messages]
         kinds = [str(e.get("type", "value_error")) for e in exc.errors] or ["value_error" for _ in exc.messages]

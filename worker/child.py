@@ -42,19 +42,6 @@ def _watch_parent(parent_pid: int) -> None:
         time.sleep(0.5)
 
 
-def set_torch_threads(n: int) -> None:
-    """One torch thread per training process unless told otherwise (``MODSAT_TORCH_THREADS``):
-    torch's default (one per core) measured about 20x slower on a busy 2-core machine.
-
-    Set in the environment (for a torch imported later) and in torch if it is loaded."""
-    import sys
-
-    os.environ["OMP_NUM_THREADS"] = os.environ["MKL_NUM_THREADS"] = str(n)
-    torch = sys.modules.get("torch")
-    if torch is not None:
-        torch.set_num_threads(n)
-
-
 def _plain(d: Any) -> Any:
     """Only JSON types cross the pipe, so the parent never unpickles numpy or torch objects."""
     return json.loads(to_json(d))
@@ -76,6 +63,7 @@ def child_main(
     permanent: tuple[type, ...] = ()
     try:
         from modsat_core.spec.jobspec import UnrunnableSpec, parse_spec
+        from modsat_core.training.threads import set_torch_threads
 
         permanent = (UnrunnableSpec,)
         set_torch_threads(torch_threads)

@@ -11,8 +11,9 @@ queue, without the cost of training:
 * ``raise``: raises ``RuntimeError`` (the message names the job's seed).
 
 A runner is named by the ``runner`` setting: one of the names above, ``train``, or
-``package.module:function``. A runner module may define ``checkpoint_to_bytes`` and
-``checkpoint_from_bytes``; otherwise checkpoints are pickled.
+``package.module:function`` (the hook for runners outside this package, e.g. the tests';
+imported by name). ``train`` and the runners above are plain imports. A runner module may
+define ``checkpoint_to_bytes`` and ``checkpoint_from_bytes``; otherwise checkpoints are pickled.
 """
 
 from __future__ import annotations
@@ -28,12 +29,8 @@ from typing import Any
 
 from modsat_core.artefacts import CurvePoint, ProgressRecord
 
-RUNNERS = {
-    "train": "worker.train_runner:train",
-    "noop": "worker.runners:noop",
-    "simulated": "worker.runners:simulated",
-    "raise": "worker.runners:raising",
-}
+#: The runners of this package by name (``train`` is the default; the others are functions below).
+RUNNERS = ("train", "noop", "simulated", "raise")
 
 
 @dataclass
@@ -46,14 +43,23 @@ class Runner:
 
 
 def runner_path(name: str) -> str:
-    path = RUNNERS.get(name, name)
-    if ":" not in path:
+    """Check a runner name: one of :data:`RUNNERS`, or ``package.module:function``."""
+    if name not in RUNNERS and ":" not in name:
         raise ValueError(f"unknown runner {name!r}: use one of {', '.join(RUNNERS)} or 'package.module:function'")
-    return path
+    return name
 
 
 def load_runner(name: str) -> Runner:
-    module_name, func_name = runner_path(name).split(":", 1)
+    """The runner ``name`` (:func:`runner_path`). ``train`` imports torch: call this in the training child."""
+    runner_path(name)
+    if name == "train":
+        from . import train_runner
+
+        return Runner(train_runner.train, train_runner.checkpoint_to_bytes, train_runner.checkpoint_from_bytes)
+    if name in RUNNERS:
+        func = {"noop": noop, "simulated": simulated, "raise": raising}[name]
+        return Runner(func, checkpoint_to_bytes, checkpoint_from_bytes)
+    module_name, func_name = name.split(":", 1)
     module = importlib.import_module(module_name)
     return Runner(
         train=getattr(module, func_name),

@@ -34,7 +34,9 @@ def print_report(report: dict | list, path: str | None) -> None:
 
 def set_threads(n: int | None) -> None:
     """Torch threads of this process: ``--threads``, else MODSAT_TORCH_THREADS, else 1 (on a busy
-    machine torch's default of one per core measured about 20x slower)."""
+    machine torch's default of one per core measured about 20x slower); set by
+    :func:`modsat_core.training.threads.set_torch_threads`, as the worker's training child does."""
+    from modsat_core.training.threads import set_torch_threads
 
     if n is None:
         raw = os.environ.get("MODSAT_TORCH_THREADS", "").strip() or "1"
@@ -43,13 +45,14 @@ def set_threads(n: int | None) -> None:
         n = int(raw)
     if not 1 <= n <= 256:
         raise SystemExit(f"modsat: --threads must be from 1 to 256; got {n}")
-    import torch
-
-    torch.set_num_threads(n)
+    set_torch_threads(n)
 
 
 def load_spec(args: argparse.Namespace):
+    """``--preset NAME`` or a SPEC.json file, with the flags' overrides (``--steps``, ``--device``,
+    ``--hidden``, ``--seed``) merged in by the API's resolver (modsat_core.spec.overrides)."""
     from modsat_core.spec.jobspec import parse_spec
+    from modsat_core.spec.overrides import with_overrides
     from modsat_core.spec.presets import get_preset
 
     if (args.preset is None) == (args.spec is None):
@@ -59,18 +62,17 @@ def load_spec(args: argparse.Namespace):
     else:
         with open(args.spec, "rb") as fh:
             spec = parse_spec(fh.read())
-    updates = {}
+    training = {}
     if args.steps is not None:
-        updates["total_env_steps"] = args.steps
+        training["total_env_steps"] = args.steps
     if args.device is not None:
-        updates["device"] = args.device
+        training["device"] = args.device
     if getattr(args, "hidden", None):
-        updates["hidden_sizes"] = args.hidden
-    if updates:
-        spec = spec.model_copy(update={"training": spec.training.model_copy(update=updates)})
+        training["hidden_sizes"] = args.hidden
+    overrides: dict = {"training": training} if training else {}
     if args.seed is not None:
-        spec = spec.model_copy(update={"seed": args.seed})
-    return parse_spec(spec.model_dump_json())  # re-validated after the overrides
+        overrides["seed"] = args.seed
+    return with_overrides(spec, overrides)  # re-validated after the overrides
 
 
 def _limits():

@@ -111,9 +111,8 @@ class _ProgressBar:
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-
-    from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
-    from modsat_core.training.train import train
+    from modsat_core.verify.run import ARTIFACT_NAME as VERIFICATION
+    from worker.train_runner import checkpoint_from_bytes, checkpoint_to_bytes, train  # a job's one code path
 
     spec = load_spec(args)
     check_limits(spec, "train")
@@ -154,15 +153,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    from modsat_core.verify.run import add_verification
-    from web.viewer.recording import (
-        add_recording,  # the 3D replay, evaluation.viser (docs/viewer.md)
-    )
-
-    files = result.artifacts()
-    add_recording(files)
-    if add_verification(files):
-        report = json.loads(files["verification.json"])
+    files = result.artifacts()  # with the recording, and verification.json where the spec asks
+    if VERIFICATION in files:
+        report = json.loads(files[VERIFICATION])
         print(
             "modsat train: "
             + (
