@@ -2,8 +2,11 @@
 
 modsat_core (physics, learning) <- web (what a browser sees; modsat_core's torch-free types
 only) <- worker (job store, queue, training processes) <- server (the API and the `modsat`
-command line). Every import counts, also one inside a function: a lazy import may keep a
-command from loading torch, but it may not hide an upward import or a cycle.
+command line). Inside them, the rooms point one way too (ROOMS): the viewer (web.viewer) below
+web's face; the job store (worker.store) below the worker processes; the API's base modules
+below its routers, the app and the command line (server.cli). Every import counts, also one
+inside a function: a lazy import may keep a command from loading torch, but it may not hide an
+upward import or a cycle.
 """
 
 from __future__ import annotations
@@ -29,6 +32,15 @@ WEB_MAY_USE = {"modsat_core.grid", "modsat_core.artefacts", "modsat_core.evaluat
 CORE_LAYERS = ("spec", "sim", "codesign", "agent", "evaluation", "training", "verify", "bench")
 #: The modules at modsat_core's top level: torch-free records every package may use.
 CORE_TOP = {"modsat_core", "modsat_core.grid", "modsat_core.artefacts"}
+#: The rooms of web, worker and server, bottom up: a module may import its own package's rooms at
+#: or below its own, never one above. A room is a module or a sub-package; "*" is the package's
+#: other modules (its face, and for server: settings, schemas, deps, submit, security, hosting,
+#: service_bench).
+ROOMS = {
+    "web": ("web.viewer", "*"),
+    "worker": ("worker.jsonsafe", "worker.store", "*"),
+    "server": ("*", "server.routers", "server.app", "server.cli"),
+}
 
 
 def module_imports(root: Path) -> dict[str, set[str]]:
@@ -96,6 +108,29 @@ def core_layer_violations(graph: dict[str, set[str]]) -> list[str]:
     return out
 
 
+def room(mod: str) -> tuple[str, int]:
+    """A module of web, worker or server -> (its room, the room's index in ROOMS)."""
+    rooms = ROOMS[mod.split(".")[0]]
+    for i, r in enumerate(rooms):
+        if r != "*" and (mod == r or mod.startswith(r + ".")):
+            return r, i
+    return "*", rooms.index("*")
+
+
+def room_violations(graph: dict[str, set[str]]) -> list[str]:
+    out = []
+    for mod, deps in sorted(graph.items()):
+        pkg = mod.split(".")[0]
+        if pkg not in ROOMS:
+            continue
+        name, level = room(mod)
+        for dep in sorted(d for d in deps if d.split(".")[0] == pkg):
+            dep_name, dep_level = room(dep)
+            if dep_level > level:
+                out.append(f"{mod} imports {dep}: {pkg}'s room {dep_name} is above {name}")
+    return out
+
+
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """The import cycles (each as the path that closes it), by depth-first search."""
     found, state, stack = [], {}, []
@@ -129,6 +164,14 @@ def test_modsat_core_packages_point_one_way():
     assert core_layer_violations(graph) == []
 
 
+def test_the_rooms_inside_web_worker_and_server_point_one_way():
+    graph = module_imports(ROOT)
+    for pkg, rooms in ROOMS.items():  # every room named is there
+        for r in rooms:
+            assert r == "*" or r in graph, f"{r} (ROOMS[{pkg!r}]) is not a module or package"
+    assert room_violations(graph) == []
+
+
 def test_no_import_cycles():
     assert cycles(module_imports(ROOT)) == []
 
@@ -142,7 +185,14 @@ def test_the_check_fails_on_a_planted_upward_import_and_cycle(tmp_path):
     (tmp_path / "worker" / "a.py").write_text("from .b import x\n")
     (tmp_path / "worker" / "b.py").write_text("def g():\n    from worker.a import y\n")
     (tmp_path / "web" / "scene.py").write_text("from modsat_core.low import f\n")
+    (tmp_path / "worker" / "store").mkdir()
+    (tmp_path / "worker" / "store" / "__init__.py").write_text("")
+    (tmp_path / "worker" / "store" / "queue.py").write_text("def h():\n    from worker.main import run  # upward\n")
+    (tmp_path / "worker" / "main.py").write_text("from .store import queue\n")
     graph = module_imports(tmp_path)
+    rooms = room_violations(graph)
+    assert any(p.startswith("worker.store.queue imports worker.main") for p in rooms), rooms
+    assert not any(p.startswith("worker.main") for p in rooms), rooms
     problems = layer_violations(graph)
     assert any(p.startswith("modsat_core.low imports server.app") for p in problems), problems
     assert any(p.startswith("web.scene imports modsat_core.low") for p in problems), problems
@@ -156,6 +206,12 @@ def test_the_check_fails_on_a_planted_upward_import_and_cycle(tmp_path):
     found = cycles(graph)
     assert ["worker.a", "worker.b", "worker.a"] in found, found
     assert any("modsat_core.low" in c and "server.app" in c for c in found), found
+
+
+def test_the_api_and_the_command_line_load_no_torch():
+    code = "import sys\nimport server.app, server.cli\nassert 'torch' not in sys.modules, 'torch was imported'\n"
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
 
 
 def test_validating_a_spec_and_drawing_the_scene_load_no_torch():
