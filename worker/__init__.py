@@ -1,6 +1,8 @@
-"""modsat's job queue: the SQL job store (worker.store), the artefact store (in the same
-database), and the worker processes (worker.main, worker.attempt, worker.child).
+"""modsat's job queue: the job store (worker.store: the SQL schema, the queries and the
+artefacts in the same database; the API imports it too), the worker processes (worker.main,
+worker.attempt, worker.child) and what a job runs (worker.runners; the default,
+worker.train_runner, is also what ``modsat train`` runs).
 
-``server`` -> ``worker`` -> ``modsat_core``: this package imports no web framework, and
-torch only inside the training child process.
+``server`` -> ``worker`` -> ``web`` -> ``modsat_core``: this package imports no web framework,
+and torch only inside the training child process.
 """
