@@ -190,6 +190,17 @@ class Flight:
         self.noisy = bool((self.attitude_noise > 0).any() or (self.rate_noise > 0).any())
         self.weakened = bool((self.fraction < 1.0).any())
 
+    def grow_slots(self, K: int) -> None:
+        """The sim's wheel-unit slots grown to ``K`` (:meth:`SlewSim.grow_slots`), no command on its way
+        to the new ones."""
+        pad = K - self.sim.K
+        if pad <= 0:
+            return
+        self.sim.grow_slots(K)
+        h = self.history
+        self.history = torch.cat([h, h.new_zeros(h.shape[0], h.shape[1], pad, 3)], dim=2)
+        self._model = None
+
     def reset_rows(self, idx: Tensor) -> None:
         """New slews on rows ``idx``: no command is on its way to their wheels."""
         if self.history.shape[0]:

@@ -245,6 +245,22 @@ class SlewSim:
             momentum_weight=mw,
         )
 
+    def grow_slots(self, K: int) -> None:
+        """Room for ``K`` wheel-unit slots where there are fewer: the new slots empty and their wheels
+        still (a design learner's draws may carry more units than the designs it started with)."""
+        pad = K - self.K
+        if pad <= 0:
+            return
+        p, st = self.plant, self.state
+        mw = p.momentum_weight
+        self.plant = replace(
+            p,
+            actuator_mask=torch.cat([p.actuator_mask, p.actuator_mask.new_zeros(self.B, pad)], dim=1),
+            momentum_weight=None if mw is None else torch.cat([mw, mw.new_zeros(self.B, pad)], dim=1),
+        )
+        self.state = dyn.State(st.q_BN, st.omega_B, torch.cat([st.h_B, st.h_B.new_zeros(self.B, pad, 3)], dim=1), st.t_s)
+        self.K = K
+
     # ------------------------------------------------------------------ reset / observe
     def reset(self, idx: Tensor | list[int], draws: list[EpisodeDraw]) -> None:
         """Start new episodes for satellites ``idx`` (len b) from ``draws`` (len b).

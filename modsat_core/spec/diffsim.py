@@ -121,6 +121,16 @@ class Diffsim(_Section):
             "compares them)."
         ),
     )
+    design_empty_prior: float | None = Field(
+        None,
+        gt=0.0,
+        lt=1.0,
+        description=(
+            "`diffsim-codesign`: the probability with which the design distribution starts each free cell "
+            "empty (the other types share the rest equally); null: every type equally likely. On a big grid "
+            "a uniform start draws satellites of hundreds of modules; a sparse start draws small ones."
+        ),
+    )
     design_lr: float = Field(
         0.1, gt=0.0, le=10.0, description="`diffsim-codesign`: Adam learning rate of the per-cell type logits."
     )

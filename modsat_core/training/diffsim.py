@@ -207,6 +207,7 @@ class DiffsimRun:
     def fly_designs(self, idx: Tensor) -> None:
         """Put rows ``idx`` on their designs of the pool (``row_design``)."""
         designs = [self.pool[i] for i in self.row_design[idx].tolist()]
+        self.flight.grow_slots(max(d.n_actuators for d in designs))
         K = self.sim.plant.actuator_mask.shape[1]
         packed, momentum = slot_masks(designs, bool(self.spec.modules.wheels))
         mask = np.zeros((len(designs), K), dtype=packed.dtype)
@@ -302,6 +303,7 @@ class DiffsimRun:
         self.opt.load_state_dict(d["opt"])
         self.rng.bit_generator.state = d["rng"]
         self.ep_steps = torch.as_tensor(d["ep_steps"], dtype=torch.long)
+        self.flight.grow_slots(d["sim"]["h_B"].shape[1])  # the slots the flights had grown to
         if len(self.pool) > 1:
             self.row_design = torch.as_tensor(d["row_design"], dtype=torch.long)
             self.fly_designs(torch.arange(len(self.row_design)))

@@ -78,6 +78,16 @@ def objective_s(
     return out
 
 
+def initial_logits(shape: tuple[int, ...], empty_prior: float | None) -> Tensor:
+    """Per-cell type logits (..., T), float64, that draw a cell empty with probability ``empty_prior``
+    and every other type equally often (None: every type equally, zeros)."""
+    logits = torch.zeros(shape, dtype=torch.float64)
+    if empty_prior is not None:
+        T = shape[-1]
+        logits[..., EMPTY] = math.log(empty_prior * (T - 1) / (1.0 - empty_prior))
+    return logits.requires_grad_(True)
+
+
 def fixed_cells(
     design_space: DesignSpace, objective: Objective, catalog: ModuleCatalog | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -208,7 +218,7 @@ class DiffsimCodesignRun(DiffsimRun):
         self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective, spec.modules)
         # a cell's types: empty, structure, and each wheel unit type of the parts catalog
         types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
-        self.logits = torch.zeros(N**3, types, dtype=torch.float64, requires_grad=True)
+        self.logits = initial_logits((N**3, types), spec.diffsim.design_empty_prior)
         self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
         self.design_rng = np.random.default_rng([spec.seed, 5])
         self.records: list[dict] = []  # one per design update
@@ -217,15 +227,16 @@ class DiffsimCodesignRun(DiffsimRun):
 
     # ------------------------------------------------------------------ the distribution
     def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
-        """The mode and a first batch of draws, those that are valid; first of all, a design with a
-        wheel unit in every free cell, so that the simulator has a slot for every wheel a draw can
-        have (it flies only the first slews of the rows that draw it)."""
+        """The mode and a first batch of draws, those that are valid (where none is: a design with a wheel
+        unit in every free cell). The simulator's wheel-unit slots grow with the designs it flies."""
         N = self.spec.design.grid_size
-        every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
-        every[self.fixed] = self.fixed_types[self.fixed]
         grids, _ = self.draw(self.d.design_batch)
         flyable = [g for g in [self.mode(), *grids] if (g >= ACTUATOR).any()]  # a wheel unit: valid
-        return (flyable or [every])[0], [every, *flyable]
+        if not flyable:
+            every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
+            every[self.fixed] = self.fixed_types[self.fixed]
+            flyable = [every]
+        return flyable[0], flyable
 
     def probabilities(self) -> np.ndarray:
         return torch.softmax(self.logits.detach(), dim=-1).numpy()

@@ -52,6 +52,7 @@ from modsat_core.training.diffsim_codesign import (
     draw_grids,
     fixed_cells,
     grid_log_prob,
+    initial_logits,
     load_design_state,
     mode_grid,
 )
@@ -164,7 +165,7 @@ class ParetoRun(DiffsimRun):
         L = len(self.prices)
         self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective, spec.modules)
         types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
-        self.logits = torch.zeros(L, N**3, types, dtype=torch.float64, requires_grad=True)
+        self.logits = initial_logits((L, N**3, types), spec.diffsim.design_empty_prior)
         self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
         self.design_rng = np.random.default_rng([spec.seed, 5])
         self.records: list[dict] = []
@@ -190,14 +191,16 @@ class ParetoRun(DiffsimRun):
         return max(MIN_DRAWS, self.d.design_batch // len(self.prices))
 
     def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
-        """A design with a wheel unit in every free cell first (a simulator slot for every wheel a draw
-        can have), then every distribution's first draws that are valid."""
+        """Every distribution's first draws that are valid (where none is: a design with a wheel unit in
+        every free cell). The simulator's wheel-unit slots grow with the designs it flies."""
         N = self.spec.design.grid_size
-        every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
-        every[self.fixed] = self.fixed_types[self.fixed]
         drawn = [g for l in range(len(self.prices)) for g in self.draw(self.draws_each, l)[0]]
         flyable = [g for g in drawn if (g >= ACTUATOR).any()]
-        return (flyable or [every])[0], [every, *flyable]
+        if not flyable:
+            every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
+            every[self.fixed] = self.fixed_types[self.fixed]
+            flyable = [every]
+        return flyable[0], flyable
 
     # ------------------------------------------------------------------ one design update
     def objective(self, time_s: float, grid: np.ndarray, price: float) -> float:

@@ -207,3 +207,35 @@ def test_randomised_rows_stay_inside_their_ranges():
     assert rows.torque_fraction.min() >= 0.7 and rows.torque_fraction.max() <= 1.0
     assert 0 <= rows.tumble_rad_s.min() and rows.tumble_rad_s.max() <= 0.1
     assert rows.disturbance_Nm.max() == 0.0 and rows.inertia_rotation_rad.max() == 0.0
+
+
+def test_slots_grown_mid_flight_are_empty_and_change_nothing_of_the_flight():
+    """A design learner's simulator grows its wheel-unit slots when a draw carries more units: the flights
+    under way (their wheels' momentum, the commands on their way under a delay) go on as before."""
+    modules = get_preset("trade-off-3x3x3").modules
+    grid = np.where(THREE == 2, np.array([2, 3, 2])[None, None, :].repeat(3, 0).repeat(3, 1), THREE)
+    d = Design.from_grid(grid, modules)
+    rows = RowConditions.of([Condition(delay_steps=1), Condition()])
+
+    def fly(grow_at: int | None) -> Flight:
+        sim = SlewSim.from_designs([d, d], MISSION, modules, dtype=torch.float64)
+        rng = np.random.default_rng(4)
+        sim.reset([0, 1], [draw_episode(rng, MISSION) for _ in range(2)])
+        f = Flight(sim, max_delay=1)
+        f.set_rows(torch.arange(2), rows)
+        pd = PDController(sim)
+        for k in range(30):
+            if k == grow_at:
+                f.grow_slots(sim.K + 7)
+                assert sim.K == d.n_actuators + 7 and f.history.shape == (1, 2, sim.K, 3)
+                assert not sim.plant.slots[:, d.n_actuators :].any() and not sim.state.h_B[:, d.n_actuators :].any()
+            f.step(pd)
+        return f
+
+    a, b = fly(None), fly(12)
+    K = a.sim.K
+    assert b.sim.K == K + 7 and not b.sim.state.h_B[:, K:].any()
+    torch.testing.assert_close(b.sim.state.q_BN, a.sim.state.q_BN, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(b.sim.state.omega_B, a.sim.state.omega_B, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(b.sim.state.h_B[:, :K], a.sim.state.h_B, rtol=1e-12, atol=1e-12)
+    assert a.sim.state.h_B.abs().sum() > 0  # the wheels did turn

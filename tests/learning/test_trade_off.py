@@ -67,6 +67,17 @@ def test_each_price_has_its_own_distribution_over_every_part():
     assert {2, 3} <= set(np.unique(raw))  # both wheel types are drawn
 
 
+def test_an_empty_prior_starts_every_distribution_sparse():
+    run = ParetoRun(tiny_trade_off(diffsim__design_empty_prior=0.9))
+    p = run.logits.detach().softmax(-1)
+    assert np.allclose(p[..., 0], 0.9) and np.allclose(p[..., 1:], 0.1 / 3)
+    uniform = ParetoRun(tiny_trade_off())
+    assert np.allclose(uniform.logits.detach().softmax(-1), 0.25)
+    _, raw = run.draw(256, 0)
+    free = ~run.fixed
+    assert abs(float((raw[:, free] == 0).mean()) - 0.9) < 0.03
+
+
 def test_a_trade_off_run_returns_its_front_keeps_the_lightest_that_meets_and_resumes_the_same():
     spec = tiny_trade_off()
     files = train(spec).artifacts()
