@@ -79,8 +79,17 @@ def _rate(fn, min_seconds: float) -> tuple[int, float]:
             return n, elapsed
 
 
-def bench_sim(batch_sizes=(1, 256, 4096), min_seconds: float = 2.0, dtype: str = "float32") -> dict:
-    """Control steps per second of the batched simulator and of the numpy reference."""
+#: Wheel-unit slots timed at batch 256 (``slots_K`` rows): a co-design run's simulator holds as many slots
+#: as the largest design it flies; sized for every free cell of a 10x10x10 grid it held 900.
+SLOT_COUNTS = (8, 32, 128, 900)
+
+
+def bench_sim(
+    batch_sizes=(1, 256, 4096), min_seconds: float = 2.0, dtype: str = "float32", slot_counts=SLOT_COUNTS
+) -> dict:
+    """Control steps per second of the batched simulator and of the numpy reference; and of the
+    simulator at batch 256 with ``slot_counts`` wheel-unit slots, one of them holding a unit (the cost
+    of empty slots)."""
     spec = JobSpec()
     mission, modules = spec.mission, spec.modules
     design = Design.from_grid(reference_design(3), modules)
@@ -108,6 +117,15 @@ def bench_sim(batch_sizes=(1, 256, 4096), min_seconds: float = 2.0, dtype: str =
         action = torch.full((B, sim.K, 3), 0.01, dtype=torch_dtype)
         n, el = _rate(lambda sim=sim, action=action: sim.step(action), min_seconds)
         results[f"torch_{B}"] = {"batch": B, "control_steps_per_s": B * n / el}
+    for K in slot_counts:
+        B = 256
+        mask = np.zeros((B, K), dtype=bool)
+        mask[:, 0] = True
+        sim = SlewSim(np.stack([design.I_B] * B), mask, mission, modules, dtype=torch_dtype)
+        sim.reset(list(range(B)), [draw] * B)
+        action = torch.full((B, K, 3), 0.01, dtype=torch_dtype)
+        n, el = _rate(lambda sim=sim, action=action: sim.step(action), min_seconds)
+        results[f"slots_{K}"] = {"batch": B, "slots": K, "control_steps_per_s": B * n / el}
     base = results["numpy_1"]["control_steps_per_s"]
     for r in results.values():
         r["ratio_to_numpy"] = r["control_steps_per_s"] / base

@@ -18,7 +18,8 @@ def test_bench_sim_json_reports_rates_and_ratios():
     assert r.returncode == 0, r.stderr
     report = json.loads(r.stdout)
     res = report["results"]
-    assert set(res) == {"numpy_1", "torch_1", "torch_8"}
+    assert set(res) == {"numpy_1", "torch_1", "torch_8", "slots_8", "slots_32", "slots_128", "slots_900"}
+    assert [res[f"slots_{k}"]["slots"] for k in (8, 32, 128, 900)] == [8, 32, 128, 900]
     assert res["numpy_1"]["ratio_to_numpy"] == 1.0
     for v in res.values():
         assert v["control_steps_per_s"] > 0
