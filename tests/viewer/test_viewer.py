@@ -124,6 +124,22 @@ def test_recording_is_a_viser_file_of_the_slews():
     assert not add_recording(broken) and RECORDING_NAME not in broken, "a failure never raises"
 
 
+def test_a_1000_cell_design_is_drawn_and_recorded():
+    """The biggest grid a spec allows (10x10x10), every cell filled, wheel units of three catalog types."""
+    rng = np.random.default_rng(0)
+    grid = rng.choice([1, 2, 3, 4], size=(10, 10, 10), p=[0.7, 0.1, 0.1, 0.1])
+    vox = Voxels.from_grid(grid)
+    assert len(vox.positions) == 1000 and np.allclose(vox.positions.mean(axis=0), 0.0)
+    assert vox.colors_linear.shape == (1000, 3)
+    assert np.allclose(vox.colors_linear[vox.types >= 2], srgb_to_linear(ACTUATOR_SRGB))  # every wheel type a unit
+    assert vox.edge_segments().shape == (3 * 10 * 11 * 11, 2, 3)  # a full n^3 block: 3 n (n + 1)^2 edges
+    files = _files()
+    files["design.json"] = DesignReport.of(grid.tolist()).to_json()
+    small = recording_bytes(_files()["design.json"], files["trajectories.json"])
+    big = recording_bytes(files["design.json"], files["trajectories.json"])
+    assert len(big) > len(small) and len(big) < 2_000_000
+
+
 def test_live_viewer_sessions(tmp_path):
     """Sessions built as for a browser tab (viser's ClientHandle API), driven from Python."""
     from web.viewer.live import DirRuns, Session, ViewerApp
