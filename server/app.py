@@ -28,6 +28,7 @@ from modsat_core.spec.jobspec import JobSpec
 from worker.store import JobStore
 
 from .hosting import mount_static, start_viewer
+from .routers.archive import router as archive_router
 from .routers.jobs import router as jobs_router
 from .routers.service import service_router
 from .routers.studies import router as studies_router
@@ -248,7 +249,7 @@ def create_app(
     if store is not None:
         app.state.store = store
     _install_error_handlers(app)
-    routers = [jobs_router, studies_router, service_router(), viewer_router()]
+    routers = [jobs_router, archive_router, studies_router, service_router(), viewer_router()]
     for router in routers:
         app.include_router(router)
     app.include_router(_api_not_found(routers))
