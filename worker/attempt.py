@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError, SQLAlchemyError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 
+from modsat_core.agent.onnx_meta import stamp_job_id
 from modsat_core.spec.jobspec import SpecError, parse_spec
 from modsat_core.spec.limits import check as check_limits
 
@@ -268,6 +269,7 @@ class Attempt:
         if result is not None and result[0] == "result":
             info, files = result[1], result[2]
             if not info["stopped"]:
+                files = stamp_job_id(files, c.job_id)  # the ONNX export names its job (docs/export.md)
                 ok = self.store.complete(
                     c, files=files, summary=info.get("summary"), env_steps=info["env_steps"], attempt_seconds=dt
                 )

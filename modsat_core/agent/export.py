@@ -7,7 +7,8 @@ in three files:
 ``policy_export.pt2``
     A ``torch.export`` program (``torch.export.load(path).module()``), batch size dynamic.
 ``policy_export.onnx``
-    The same program in ONNX (opset 20), for onnxruntime and flight software without torch.
+    The same program in ONNX (opset 20), for onnxruntime and flight software without torch. Its
+    ``metadata_props`` carry the conventions (:func:`onnx_metadata`, modsat_core.agent.onnx_meta).
 ``policy_export.pt``
     TorchScript (``torch.jit.load``), deprecated in torch 2.13 but kept: it is what runs from
     before these formats carry, ``modsat verify`` reads, and any torch since 1.x loads.
@@ -27,8 +28,11 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+import modsat_core
+from modsat_core.agent.onnx_meta import conventions, with_metadata
 from modsat_core.agent.policy import exported
 from modsat_core.grid import ACTUATOR
+from modsat_core.sim.slew import Design
 from modsat_core.spec.jobspec import JobSpec
 
 log = logging.getLogger(__name__)
@@ -106,6 +110,24 @@ def onnx_bytes(program: torch.export.ExportedProgram) -> bytes:
     return onnx_program.model_proto.SerializeToString()
 
 
+def onnx_metadata(grid: np.ndarray, spec: JobSpec, job_id: int | None = None) -> dict[str, str]:
+    """The ONNX file's ``metadata_props``: control step, torque scale, wheel order and frames, the
+    hash of the run's ``spec.json``, the job id (empty where the run does not know it: the worker stamps
+    it), modsat's version, the input and output layout and the design (docs/export.md)."""
+    m = spec.mission
+    torque_max = spec.modules.torque_scale_Nm * Design.from_grid(grid, spec.modules).slot_weights()[0]
+    return conventions(
+        version=modsat_core.__version__,
+        spec_json=spec.model_dump_json(indent=2),  # the bytes of the run's spec.json
+        algorithm=spec.algorithm,
+        control_dt_s=m.physics_dt_s * m.frame_skip,
+        torque_scale_Nm=spec.modules.torque_scale_Nm,
+        unit_torque_max_Nm=[float(t) for t in torque_max],
+        grid=np.asarray(grid).tolist(),
+        job_id=job_id,
+    )
+
+
 def export_files(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> dict[str, bytes]:
     """The standalone controller's files of a run (the module docstring): those that could be
     written. An exporter that fails is reported (a warning) and its file left out: a finished run
@@ -116,9 +138,10 @@ def export_files(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> dict[str,
     except Exception as exc:
         _left_out("policy_export.pt2 and policy_export.onnx", exc)
         return files
+    doc = "modsat attitude controller: tau_cmd_B = controller(q_BT, omega_B, h_B); see metadata_props"
     writers: dict[str, Callable[[torch.export.ExportedProgram], bytes]] = {
         "policy_export.pt2": program_bytes,
-        "policy_export.onnx": onnx_bytes,
+        "policy_export.onnx": lambda p: with_metadata(onnx_bytes(p), onnx_metadata(grid, spec), doc),
     }
     for name, write in writers.items():
         try:
