@@ -6,6 +6,7 @@ a finished run writes (docs/learning.md, "Outputs of a run").
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -114,9 +115,21 @@ def design_report(grid: np.ndarray, spec: JobSpec) -> DesignReport:
     )
 
 
-def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, episodes: int | None = None) -> dict:
-    """The policy and the PD baseline on the same design and the same seeded slews."""
+def final_evaluation(
+    actor: torch.nn.Module,
+    grid: np.ndarray,
+    spec: JobSpec,
+    episodes: int | None = None,
+    on_stage: Callable[[int, int, str], None] | None = None,
+) -> dict:
+    """The policy and the PD baseline on the same design and the same seeded slews.
+
+    ``on_stage(i, n, what)`` is told before each of its ``n`` stages (the policy and PD on the
+    nominal slews, then under the flight conditions) starts: ``modsat eval`` prints it."""
     ev = spec.evaluation
+    conditions = ev.conditions
+    n_stages = 2 + 2 * bool(conditions)
+    stage = on_stage or (lambda _i, _n, _what: None)
     n = episodes or ev.episodes
     tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
     out: dict[str, Any] = {"episodes": n, "seed": ev.seed, "design_valid": bool(is_valid(grid))}
@@ -131,12 +144,14 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
         return out
     design = Design.from_grid(grid, spec.modules)
     kw: dict[str, Any] = dict(episodes=n, seed=ev.seed, record=min(ev.trajectories, n), dtype=torch.float64)
+    stage(1, n_stages, f"the policy on {n} nominal slews")
     mc = monte_carlo(design, controller_for(actor, grid, spec), spec.mission, spec.modules, **kw)
+    stage(2, n_stages, f"PD on the same {n} slews")
     pd = monte_carlo(design, PDController, spec.mission, spec.modules, **kw)
     out["policy"] = {"summary": mc.summary(tols), "episodes": mc.episodes}
     out["pd_baseline"] = {"summary": pd.summary(tols), "episodes": pd.episodes}
     out["trajectories"] = {"policy": mc.trajectories, "pd_baseline": pd.trajectories}
-    out["conditions"], flown = condition_table(actor, grid, design, spec, tols, n)
+    out["conditions"], flown = condition_table(actor, grid, design, spec, tols, n, stage)
     conds = [ConditionEvaluation.model_validate(c) for c in out["conditions"]]
     out["flight_failures"] = [f.to_dict() for f in flight_failures(conds)]
     if spec.requirements is not None:
@@ -152,7 +167,13 @@ def final_evaluation(actor: torch.nn.Module, grid: np.ndarray, spec: JobSpec, ep
 
 
 def condition_table(
-    actor: torch.nn.Module, grid: np.ndarray, design: Design, spec: JobSpec, tols: tuple[float, ...], episodes: int
+    actor: torch.nn.Module,
+    grid: np.ndarray,
+    design: Design,
+    spec: JobSpec,
+    tols: tuple[float, ...],
+    episodes: int,
+    on_stage: Callable[[int, int, str], None] | None = None,
 ) -> tuple[list[dict], dict[str, list[dict]]]:
     """The policy and PD under each of ``evaluation.conditions``, on the evaluation's slews (float64,
     the mission's physics): one row per condition with each controller's summary at ``tols``, and the
@@ -162,7 +183,11 @@ def condition_table(
         return [], {}
     kw: dict[str, Any] = dict(episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
     m, mods = spec.mission, spec.modules
+    stage = on_stage or (lambda _i, _n, _what: None)
+    names = ", ".join(c.name for c in conditions)
+    stage(3, 4, f"the policy on {episodes} slews under each of {len(conditions)} flight conditions ({names})")
     pol = monte_carlo_conditions(design, controller_for(actor, grid, spec), m, mods, conditions, **kw)
+    stage(4, 4, f"PD on the same slews under each of {len(conditions)} flight conditions")
     pd = monte_carlo_conditions(design, PDController, m, mods, conditions, **kw)
     rows = [
         {

@@ -13,6 +13,16 @@ import time
 from .common import check_limits, load_spec, log, set_threads
 
 
+def presets_table(presets: dict) -> str:
+    """One line per preset, every column as wide as its widest entry (names of any length align)."""
+    rows = [
+        (name, spec.algorithm, "x".join([str(spec.design.grid_size)] * 3), f"{spec.training.total_env_steps:,}")
+        for name, spec in presets.items()
+    ]
+    w = [max(len(r[i]) for r in rows) for i in range(4)] if rows else [0] * 4
+    return "\n".join(f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d:>{w[3]}} env steps" for a, b, c, d in rows)
+
+
 def _cmd_presets(args: argparse.Namespace) -> int:
     from modsat_core.spec.presets import PRESETS, get_preset
 
@@ -21,10 +31,7 @@ def _cmd_presets(args: argparse.Namespace) -> int:
     elif args.json:
         print(json.dumps({k: v.model_dump(mode="json") for k, v in PRESETS.items()}, indent=2))
     else:
-        for name, spec in PRESETS.items():
-            t = spec.training
-            n = spec.design.grid_size
-            print(f"{name:<12} {spec.algorithm:<13} {n}x{n}x{n}  {t.total_env_steps:>9,} env steps")
+        print(presets_table(PRESETS))
     return 0
 
 
@@ -254,7 +261,13 @@ def _cmd_eval(args: argparse.Namespace) -> int:
             print(f"modsat eval: --conditions: {exc}", file=sys.stderr)
             return 2
         spec = spec.model_copy(update={"evaluation": evaluation})
-    ev = final_evaluation(actor, grid, spec, episodes=args.episodes)
+    t0 = time.monotonic()
+
+    def on_stage(i: int, n: int, what: str) -> None:  # a line per stage: the evaluation takes a minute
+        print(f"modsat eval: [{i}/{n}] {time.monotonic() - t0:5.1f} s  flying {what}", file=sys.stderr, flush=True)
+
+    ev = final_evaluation(actor, grid, spec, episodes=args.episodes, on_stage=on_stage)
+    print(f"modsat eval: done in {time.monotonic() - t0:.1f} s", file=sys.stderr, flush=True)
     ev.pop("trajectories")
     if args.json:
         ev["policy"].pop("episodes", None)
