@@ -19,6 +19,8 @@ const state = {
   selected: null, job: null, detailStream: null, evalPoints: [], curveFromFile: null, reference: null,
   view: null, compare: "",
   designs: new Map(), // job id -> design.json's grid (null: none), kept: a finished job's design never changes
+  outcomes: new Map(), // job id -> GET /api/jobs/{id}/outcome of a finished job (null: asked for), kept too
+  records: [], // the selected job's progress records (env_steps, elapsed_s, phase, time): ETA and timings
 };
 
 // ------------------------------------------------------------------ helpers
@@ -153,11 +155,41 @@ function nameCell(j) {
       el("span", { class: "algo", text: j.algorithm }))));
 }
 
+// What a user compares jobs by: success at the mission's tolerance in the final evaluation and, for
+// co-design, the kept design's objective (a trade-off: its mass and settling). A running job shows its
+// latest curve point's success, marked as such; never a raw return (its scale differs between presets).
+function resultText(j) {
+  const o = state.outcomes.get(String(j.id));
+  if (o && o.success_rate != null) {
+    const tol = o.tolerance_deg != null ? ` @ ${+o.tolerance_deg.toFixed(3)}\u00b0` : "";
+    const parts = [`${fmt.pct(o.success_rate)}${tol}`];
+    if (o.objective_s != null) parts.push(`J ${o.objective_s.toFixed(2)} s`);
+    if (o.mass_kg != null) parts.push(`${o.mass_kg.toFixed(2)} kg, ${fmt.num(1)(o.median_settling_s)} s`);
+    return parts.join(" \u00b7 ");
+  }
+  if (j.status !== "succeeded" && j.last_eval && j.last_eval.success_rate != null) {
+    return `curve ${fmt.pct(j.last_eval.success_rate)}`;
+  }
+  return "";
+}
+
+async function loadOutcomes(items) {
+  const want = items.filter((j) => j.status === "succeeded" && !state.outcomes.has(String(j.id)));
+  await Promise.all(want.map(async (j) => {
+    const id = String(j.id);
+    state.outcomes.set(id, null);
+    const r = await api(`/api/jobs/${id}/outcome`);
+    if (r.ok) state.outcomes.set(id, r.body);
+    const cell = document.querySelector(`#job-${id} td.ret`);
+    if (cell) cell.textContent = resultText(j);
+  }));
+}
+
 function renderRows(items) {
   const rows = $("job-rows");
   rows.replaceChildren();
   for (const j of items) {
-    const ret = j.last_eval && j.last_eval.mean_return != null ? j.last_eval.mean_return.toFixed(1) : "";
+    const ret = resultText(j);
     const tr = el("tr", { id: "job-" + j.id, tabindex: "0", "data-id": j.id,
       class: String(j.id) === String(state.selected) ? "selected" : null },
       el("td", { class: "num", text: j.id }), nameCell(j), el("td", { class: "status" }, statusBadge(j)),
@@ -171,6 +203,7 @@ function renderRows(items) {
   }
   if (!items.length) rows.append(el("tr", {}, el("td", { colspan: "5", class: "hint", text: "no jobs" })));
   loadThumbs(items);
+  loadOutcomes(items);
 }
 
 async function loadJobs() {
@@ -200,9 +233,7 @@ function updateRow(id, fields) {
   if (!tr) return;
   if (fields.progress) tr.querySelector("td.prog").replaceChildren(progressCell(fields));
   if (fields.status) tr.querySelector("td.status").replaceChildren(statusBadge(fields));
-  if (fields.last_eval && fields.last_eval.mean_return != null) {
-    tr.querySelector("td.ret").textContent = fields.last_eval.mean_return.toFixed(1);
-  }
+  if (fields.last_eval || fields.status) tr.querySelector("td.ret").textContent = resultText(fields);
 }
 
 // One event stream per running job on the page (at most MAX_LIST_STREAMS), for live progress.
@@ -425,6 +456,7 @@ function renderHead(job) {
   $("d-meta").textContent = `${job.algorithm}, created ${new Date(job.created_at).toLocaleString()}` +
     (job.attempt > 1 ? `, attempt ${job.attempt}` : "");
   $("cancel-btn").hidden = TERMINAL.has(job.status);
+  $("d-times").textContent = timesText(job);
   renderProgress(job.progress, job.latest_metrics);
   renderAttempts(job);
   const err = $("d-error");
@@ -444,11 +476,74 @@ function attemptSeconds(job, now) {
   });
 }
 
+// The first progress record of the final evaluation (phase "evaluating"), if there is one.
+function evaluationRecord() {
+  return state.records.find((r) => r.phase === "evaluating") || null;
+}
+
+// The job's wall time: queued -> finished, and how it splits (waiting, training, final evaluation).
+function timesText(job) {
+  const t = (x) => (x ? Date.parse(x) : null);
+  const created = t(job.created_at), started = t(job.started_at), finished = t(job.finished_at);
+  const ev = evaluationRecord();
+  const parts = [];
+  if (finished && created) {
+    parts.push(`wall time ${fmt.dur((finished - created) / 1000)} (queued \u2192 ${job.status})`);
+    if (started) parts.push(`waited ${fmt.dur((started - created) / 1000)}`);
+    if (ev && ev.elapsed_s != null) parts.push(`training ${fmt.dur(ev.elapsed_s)}`);
+    if (ev && ev.time) parts.push(`final evaluation ${fmt.dur((finished - Date.parse(ev.time)) / 1000)}`);
+    else if (job.progress && job.progress.run_seconds) parts.push(`running ${fmt.dur(job.progress.run_seconds)}`);
+  } else if (started && created) {
+    parts.push(`waited ${fmt.dur((started - created) / 1000)} in the queue`);
+  } else if (created && job.status === "queued") {
+    parts.push("waiting for a worker");
+  }
+  return parts.join(" \u00b7 ");
+}
+
+// Training speed from the latest attempt's progress records: env steps per second of elapsed_s.
+function stepsPerSecond() {
+  const recs = state.records.filter((r) => r.elapsed_s != null && r.phase !== "evaluating");
+  if (!recs.length) return null;
+  const last = recs[recs.length - 1];
+  const same = recs.filter((r) => r.attempt === last.attempt);
+  const first = same[0];
+  if (same.length > 1 && last.elapsed_s > first.elapsed_s && last.env_steps > first.env_steps) {
+    return (last.env_steps - first.env_steps) / (last.elapsed_s - first.elapsed_s);
+  }
+  return last.attempt === 1 && last.elapsed_s > 0 && last.env_steps > 0 ? last.env_steps / last.elapsed_s : null;
+}
+
+function etaText(seconds) {
+  if (!(seconds >= 0) || !Number.isFinite(seconds)) return "";
+  if (seconds < 60) return "less than a minute left";
+  if (seconds < 5400) return `about ${Math.max(1, Math.round(seconds / 60))} min left`;
+  return `about ${fmt.dur(seconds)} left`;
+}
+
 function renderProgress(p, m) {
+  const evaluating = p.phase === "evaluating" && !(state.job && TERMINAL.has(state.job.status));
+  const bar = $("d-bar");
+  bar.parentElement.classList.toggle("evaluating", evaluating);
+  bar.style.width = evaluating ? "100%" : `${Math.round(100 * p.fraction)}%`;
+  const eta = $("d-eta");
+  eta.textContent = "";
+  if (evaluating) {
+    const ev = evaluationRecord();
+    const since = ev && ev.time ? (Date.now() - Date.parse(ev.time)) / 1000 : null;
+    $("d-progress").textContent = "Final evaluation: flying the policy and the PD baseline on the evaluation's "
+      + "slews, nominal and under each flight condition" + (since != null ? ` \u00b7 ${fmt.dur(since)} so far` : "")
+      + (ev && ev.elapsed_s != null ? ` \u00b7 training took ${fmt.dur(ev.elapsed_s)}` : "");
+    return;
+  }
   $("d-bar").style.width = `${Math.round(100 * p.fraction)}%`;
   const parts = [`${fmt.int(p.env_steps)} / ${fmt.int(p.total_env_steps)} env steps`,
     `${Math.round(100 * p.fraction)} %`];
   if (p.phase) parts.push(p.phase);
+  const rate = state.job && state.job.status === "running" ? stepsPerSecond() : null;
+  if (rate && p.total_env_steps > p.env_steps) {
+    eta.textContent = etaText((p.total_env_steps - p.env_steps) / rate) + " in training, then the final evaluation";
+  }
   const job = state.job, n = job && job.attempts ? job.attempts.length : 0;
   if (n > 1) {
     // The training's elapsed_s leaves out attempts that ended without reporting (a lost lease):
@@ -633,6 +728,66 @@ function showFrontPoint(box, job, curve, i) {
     ...(table ? [table] : []), files);
 }
 
+// A co-design run's objective (spec.objective, docs/diffsim.md) in words, its parts for each design.
+function objectiveParts(grid, obj) {
+  const cells = (grid || []).flat(2);
+  const modules = cells.filter((c) => c !== 0).length, wheels = cells.filter((c) => c >= 2).length;
+  return { modules, wheels, prices: (obj.module_price_s || 0) * modules + (obj.wheel_price_s || 0) * wheels };
+}
+
+// curve.json of diffsim-codesign: the objective and its prices, the payload, the kept design against the
+// run's other candidates and the random designs of the untrained distribution, the objective over training.
+function codesignView(curve, spec, keptGrid) {
+  const obj = spec.objective || {}, mission = spec.mission || {};
+  const episodeS = mission.episode_steps && mission.physics_dt_s && mission.frame_skip
+    ? mission.episode_steps * mission.physics_dt_s * mission.frame_skip : null;
+  const terms = ["the mean settling time over the slews (a slew that does not land, or breaks the rate limit, counts "
+    + (episodeS ? `the whole episode, ${episodeS.toFixed(1)} s)` : "the whole episode)")];
+  if (obj.module_price_s) terms.push(`${obj.module_price_s} s per module`);
+  if (obj.wheel_price_s) terms.push(`${obj.wheel_price_s} s more per wheel unit`);
+  if (obj.mass_price_s_per_kg) terms.push(`${obj.mass_price_s_per_kg} s per kg`);
+  const payload = Array.isArray(obj.payload_cells) ? obj.payload_cells : [];
+  const payloadText = payload.length
+    ? `Payload: ${payload.length} cell${payload.length === 1 ? "" : "s"} held as structure in every design (`
+      + payload.slice(0, 9).map((c) => `[${c.join(", ")}]`).join(" ") + (payload.length > 9 ? " \u2026" : "") + ")."
+    : "No payload: designs grow from the centre cell, a wheel unit.";
+  const same = (a, b) => JSON.stringify(a) === JSON.stringify(b);
+  const sel = (curve.selection || []).filter((c) => c && c.objective_s != null);
+  const kept = sel.find((c) => keptGrid && same(c.grid, keptGrid)) || sel.reduce((a, b) => (!a || b.objective_s < a.objective_s ? b : a), null);
+  const row = (label, objective, grid, cls) => {
+    const p = grid ? objectiveParts(grid, obj) : null;
+    const f2 = fmt.num(2);
+    return el("tr", { class: cls || null }, el("th", { text: label }), el("td", { class: "num", text: f2(objective) }),
+      el("td", { class: "num", text: p ? f2(objective - p.prices) : "-" }),
+      el("td", { class: "num", text: p ? f2(p.prices) : "-" }),
+      el("td", { class: "num", text: p ? `${p.modules} / ${p.wheels}` : "-" }));
+  };
+  const rows = [];
+  if (kept) rows.push(row("kept design", kept.objective_s, kept.grid, "kept"));
+  sel.filter((c) => c !== kept).forEach((c) => rows.push(row(c.mode ? "the distribution's mode" : "one of the best draws", c.objective_s, c.grid)));
+  const d = curve.designs.filter((x) => x.mean_objective_s != null);
+  if (d.length) {
+    const f = d[0];
+    rows.push(row(`random designs: mean of ${f.valid_draws ?? "the"} draws of the untrained distribution`, f.mean_objective_s, null, "random"));
+    rows.push(row("random designs: best of those draws", f.best_objective_s, null, "random"));
+  }
+  const table = el("table", { class: "eval codesign-table" },
+    el("thead", {}, el("tr", {}, el("th", { text: "design" }), el("th", { class: "num", text: "objective (s)" }),
+      el("th", { class: "num", text: "settling part (s)" }), el("th", { class: "num", text: "prices (s)" }),
+      el("th", { class: "num", text: "modules / wheels" }))),
+    el("tbody", {}, ...rows));
+  const chart = window.modsatCharts.lineChart([
+    { name: "mean of the draws", color: "#1f77b4", points: d.map((x) => [x.env_steps, x.mean_objective_s]) },
+    { name: "best draw", color: "#2ca02c", points: d.map((x) => [x.env_steps, x.best_objective_s]) },
+  ], { title: "design objective over training (lower is better)", xLabel: "environment steps", yLabel: "s" });
+  return [el("h3", { text: "Co-design: the objective" }),
+    el("p", { id: "objective-text", text: "Objective, in seconds (lower is better): " + terms.join(" + ") + "." }),
+    el("p", { class: "hint", text: payloadText }),
+    el("p", { class: "hint", text: "Candidates scored on the validation slews (the mission's physics); the random "
+      + "designs' figures are the first design update's draws, on the training slews." }),
+    el("div", { class: "table-wrap" }, table), el("div", { class: "curves" }, chart)];
+}
+
 // verification.json (evaluation.basilisk): the same slews flown in modsat and in Basilisk.
 function verifyView(v) {
   const head = el("h3", { text: "Basilisk verification" });
@@ -686,6 +841,10 @@ async function renderFiles(job, files) {
     el("a", { href: f.url, download: `modsat-job-${job.id}-${f.name}`, text: f.name }),
     el("span", { class: "hint", text: ` ${fmt.bytes(f.size)} (${f.kind})` }))));
   if (!files.length) ul.append(el("li", { class: "hint", text: "no files yet" }));
+  if (files.some((f) => f.kind === "output")) {
+    ul.prepend(el("li", { class: "archive" }, el("a", { id: "archive-link", href: `/api/jobs/${job.id}/archive.zip`,
+      text: "all files (zip)" }), el("span", { class: "hint", text: " every output under its plain name, one folder" })));
+  }
 
   // Before the awaits below, so the 3D buttons never show the previous job's (or a default) state.
   const has3d = names.has("design.json") && names.has("trajectories.json");
@@ -721,9 +880,11 @@ async function renderFiles(job, files) {
     const r = await api(`/api/jobs/${job.id}/artifacts/verification.json`);
     vBox.replaceChildren(...(r.ok ? verifyView(r.body) : [el("p", { class: "errors", text: errorText(r) })]));
   }
-  const toBox = $("trade-off");
+  const toBox = $("trade-off"), cdBox = $("codesign");
   toBox.hidden = true;
   toBox.replaceChildren();
+  cdBox.hidden = true;
+  cdBox.replaceChildren();
   if (names.has("curve.json")) {
     const r = await api(`/api/jobs/${job.id}/artifacts/curve.json`);
     if (r.ok && r.body && Array.isArray(r.body.points)) state.curveFromFile = r.body.points;
@@ -731,6 +892,10 @@ async function renderFiles(job, files) {
       const s = names.has("spec.json") ? await api(`/api/jobs/${job.id}/artifacts/spec.json`) : null;
       toBox.replaceChildren(...tradeOffView(job, r.body, s && s.ok ? s.body : null));
       toBox.hidden = false;
+    } else if (r.ok && r.body && Array.isArray(r.body.designs) && r.body.designs.some((d) => d.mean_objective_s != null)) {
+      const spec = job.spec || {};
+      cdBox.replaceChildren(...codesignView(r.body, spec, state.designs.get(String(job.id))));
+      cdBox.hidden = false;
     }
   }
   drawCurves();
@@ -786,6 +951,7 @@ async function selectJob(id, view) {
   state.selected = id;
   if (changed) {
     state.evalPoints = [];
+    state.records = [];
     state.curveFromFile = null;
     state.reference = null;
     if (view === undefined) state.view = null;
@@ -803,6 +969,7 @@ async function selectJob(id, view) {
     return;
   }
   const job = jr.body;
+  state.records = mr.ok ? mr.body.items : [];
   renderHead(job);
   state.evalPoints = mr.ok ? mr.body.items.filter((m) => m.eval).map((m) => m.eval) : [];
   const has3d = await renderFiles(job, fr.ok ? fr.body : []);
@@ -818,6 +985,7 @@ function followJob(job, after) {
   state.detailStream = openEvents(id, after, {
     metrics: (m) => {
       if (String(state.selected) !== id) return;
+      state.records.push(m);
       const total = m.total_env_steps || job.progress.total_env_steps;
       renderProgress({ ...job.progress, env_steps: m.env_steps, total_env_steps: total, phase: m.phase,
         fraction: total ? Math.min(1, m.env_steps / total) : 0 }, m);

@@ -23,24 +23,38 @@ function niceTicks(lo, hi, count) {
 }
 
 function fmtTick(v) {
-  const a = Math.abs(v);
-  if (a >= 1e6) return (v / 1e6).toFixed(a >= 1e7 ? 0 : 1) + "M";
-  if (a >= 1e3) return (v / 1e3).toFixed(a >= 1e4 ? 0 : 1) + "k";
-  return String(+v.toFixed(2));
+  return tickLabels([v])[0];
+}
+
+// Labels of one axis's ticks: one unit (k, M) for the axis, and as many decimals as it takes for
+// neighbouring ticks to read differently ("6.65k 6.66k 6.67k", never "6.7k" six times).
+function tickLabels(ticks) {
+  const big = Math.max(0, ...ticks.map(Math.abs));
+  const [div, unit] = big >= 1e6 ? [1e6, "M"] : big >= 1e3 ? [1e3, "k"] : [1, ""];
+  const step = ticks.length > 1 ? Math.abs(ticks[1] - ticks[0]) / div : 1;
+  let d = Math.max(0, Math.min(6, -Math.floor(Math.log10(step) + 1e-9)));
+  const exact = (k) => ticks.every((v) => Math.abs(v / div * 10 ** k - Math.round(v / div * 10 ** k)) < 1e-6);
+  while (d < 6 && !exact(d)) d++;  // a step of 25 shows 1.175k, not 1.18k
+  for (; d <= 6; d++) {
+    const labels = ticks.map((v) => String(+(v / div).toFixed(d)) + (v === 0 ? "" : unit));
+    if (new Set(labels).size === labels.length) return labels;
+  }
+  return ticks.map((v) => String(v));
 }
 
 // The frame of a chart: y grid lines and ticks, x ticks, the two axes and their labels.
 // a: {W, H, m (margins), X, Y (data to pixels), xt, yt (ticks), xLabel, yLabel, xLabelY}.
 function drawAxes(svg, a) {
   const { W, H, m, X, Y } = a;
-  for (const v of a.yt) {
+  const yl = tickLabels(a.yt), xl = tickLabels(a.xt);
+  a.yt.forEach((v, i) => {
     svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(v), y2: Y(v), class: "grid" }));
-    svg.appendChild(svgEl("text", { x: m.l - 6, y: Y(v) + 4, "text-anchor": "end", class: "tick" }, fmtTick(v)));
-  }
-  for (const v of a.xt) {
+    svg.appendChild(svgEl("text", { x: m.l - 6, y: Y(v) + 4, "text-anchor": "end", class: "tick y-tick" }, yl[i]));
+  });
+  a.xt.forEach((v, i) => {
     svg.appendChild(svgEl("line", { x1: X(v), x2: X(v), y1: H - m.b, y2: H - m.b + 4, class: "axis" }));
-    svg.appendChild(svgEl("text", { x: X(v), y: H - m.b + 16, "text-anchor": "middle", class: "tick" }, fmtTick(v)));
-  }
+    svg.appendChild(svgEl("text", { x: X(v), y: H - m.b + 16, "text-anchor": "middle", class: "tick x-tick" }, xl[i]));
+  });
   svg.appendChild(svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, class: "axis" }));
   svg.appendChild(svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, class: "axis" }));
   svg.appendChild(svgEl("text", { x: (m.l + W - m.r) / 2, y: a.xLabelY, "text-anchor": "middle", class: "label" },
@@ -201,4 +215,4 @@ function frontChart(front, candidates, opts) {
   return svg;
 }
 
-window.modsatCharts = { lineChart, niceTicks, designThumb, frontChart };
+window.modsatCharts = { lineChart, niceTicks, tickLabels, designThumb, frontChart };
