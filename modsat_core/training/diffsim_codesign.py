@@ -364,6 +364,8 @@ class DiffsimCodesignRun(DiffsimRun):
         for g in candidates:
             if (g >= ACTUATOR).any() and not any(np.array_equal(g, u) for u in unique):
                 unique.append(g)
+        if not unique:  # a run too short for a design update, its mode without a wheel unit: the curve's design
+            unique.append(self.grid)
         ev = self.spec.evaluation
         scores = self.score(unique, ev.episodes, ev.seed + 1, exact=True)
         best = int(np.argmin(scores))

@@ -107,6 +107,16 @@ def test_a_run_learns_a_design_writes_every_output_and_resumes_the_same():
     assert resumed.artifacts()["evaluation.json"] == files["evaluation.json"]
 
 
+def test_a_run_too_short_for_a_design_update_keeps_the_design_it_flew():
+    """No design update yet, the uniform distribution's mode empty (no wheel unit), no best draws: the kept
+    design is the one the curve flew, not an error."""
+    run = DiffsimCodesignRun(tiny_codesign())
+    run.update()
+    assert not run.best and not (run.mode() >= 2).any()
+    _, grid, extra = run.chosen()
+    assert is_valid(grid) and np.array_equal(grid, run.grid) and len(extra["selection"]) == 1
+
+
 def test_the_payload_must_fit_the_grid_and_be_one_piece():
     with pytest.raises(SpecError, match="outside"):
         parse_spec({"design": {"grid_size": 2}, "objective": {"payload_cells": [[0, 0, 2]]}})
