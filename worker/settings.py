@@ -92,8 +92,32 @@ class WorkerSettings(BaseSettings):
         200_000, ge=1, description="Largest `evaluation.trajectories` x `mission.episode_steps`. Unset = no limit."
     )
 
+    max_job_hours: float | None = Field(
+        48.0,
+        gt=0,
+        description="A spec whose estimated wall time (modsat_core/spec/limits.py `work`: hours on one CPU core, "
+        "or `gpu_speedup` times faster where `training.device` is `auto` or `cuda`) is longer is refused. "
+        "Empty = no limit.",
+    )
+    gpu_speedup: float = Field(
+        30.0,
+        ge=1,
+        le=10_000,
+        description="How much faster this deployment's workers run a job that may use a GPU than one CPU core; "
+        "1 where no worker has a GPU (the paper presets then take weeks and are refused).",
+    )
+    max_checkpoints: int | None = Field(
+        1000, ge=1, description="Most checkpoints one job may write (total_env_steps / checkpoint_every_steps)."
+    )
+
     @field_validator(
-        "max_job_memory_gib", "max_env_steps", "max_evaluation_steps", "max_trajectory_steps", mode="before"
+        "max_job_memory_gib",
+        "max_env_steps",
+        "max_evaluation_steps",
+        "max_trajectory_steps",
+        "max_job_hours",
+        "max_checkpoints",
+        mode="before",
     )
     @classmethod
     def _empty_is_unset(cls, v: object) -> object:
@@ -107,6 +131,9 @@ class WorkerSettings(BaseSettings):
             max_env_steps=self.max_env_steps,
             max_evaluation_steps=self.max_evaluation_steps,
             max_trajectory_steps=self.max_trajectory_steps,
+            max_job_hours=self.max_job_hours,
+            gpu_speedup=self.gpu_speedup,
+            max_checkpoints=self.max_checkpoints,
         )
 
     @model_validator(mode="after")

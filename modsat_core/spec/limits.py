@@ -14,10 +14,19 @@ buffer itself is built from), one TD3 update's activations
 actor and four critic passes), the per-step features of the training envs, and the
 Monte-Carlo evaluation's batch (the nominal slews, or the slews of every flight condition flown
 at once, whichever is larger). docs/service.md ("Limits") lists the defaults.
+
+The work figure (:func:`work`) is an estimate, on the high side, of a run's wall time on one CPU core:
+the simulator's RK4 steps (a fixed cost per batched step plus a cost per satellite and wheel-unit slot),
+the networks' floating-point work (per sample, from their shapes), a fixed cost per TD3 update and per
+GA design, the evaluations, the co-design's design flights and the checkpoints. Its constants were
+measured with ``modsat bench sim`` and ``modsat bench update`` on the 2-core development machines
+(AMD EPYC / Intel Xeon, torch 2.13 CPU, one thread) and rounded towards the slow side. A run that
+may use a GPU (``training.device`` `auto` or `cuda`) is credited :attr:`Limits.gpu_speedup`.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -192,6 +201,35 @@ def estimate(spec: JobSpec) -> Estimate:
     )
 
 
+#: One batched RK4 step's fixed cost, seconds (torch's per-call overhead: `bench sim` at B = 1 flies
+#: 43-82 control steps/s of 20 RK4 steps, 0.6-1.2 ms each).
+CALL_S = 1.2e-3
+#: ... plus per satellite (`bench sim` at B = 256 and 4096: 0.7-1.1 us) ...
+SAT_SUBSTEP_S = 1.5e-6
+#: ... plus per satellite and wheel-unit slot (`bench sim` at B = 256 with 8 to 900 slots: 21 ns).
+SLOT_SUBSTEP_S = 4e-8
+#: An RK4 step inside a gradient window (`diffsim`): forward, the graph and the backward pass.
+GRAD_FACTOR = 3
+#: Network floating-point operations per second on one core (`bench update`: the per-module network's
+#: update on 3^3 and 5^3 grids runs at ~74 GFLOP/s counted as :data:`_UPDATE_PASSES` passes).
+FLOPS = 40e9
+#: A TD3 update's fixed cost (`bench update`: the flat network's update, 6.6 ms), and an env step
+#: batch's (features, the actor's call, the replay row).
+UPDATE_CALL_S = 8e-3
+STEP_CALL_S = 3e-3
+#: A GA design's fixed cost: a new TD3 or first-order run (networks, optimisers, replay buffer).
+DESIGN_SETUP_S = 2.0
+#: A checkpoint: serialised in the training process, sent to its worker, written to the database.
+CHECKPOINT_S = 0.5
+CHECKPOINT_BYTES_PER_S = 50e6
+#: The largest replay buffer a checkpoint carries (``CHECKPOINT_BUFFER_LIMIT_BYTES``, training/checkpoint.py).
+CHECKPOINT_BUFFER_BYTES = 256 * 2**20
+#: Designs a trade-off flies at the end (per price the mode and ``TOP_DRAWS`` = 3 best draws, and
+#: ``ARCHIVE_CANDIDATES`` = 16 points of the archive); a single-price co-design flies 1 + 3.
+TRADE_OFF_EXTRA_CANDIDATES = 16
+HOUR = 3600.0
+
+
 @dataclass(frozen=True)
 class Limits:
     """What one run may use. ``None`` = no limit."""
@@ -200,6 +238,130 @@ class Limits:
     max_env_steps: int | None = 20_000_000
     max_evaluation_steps: int | None = 50_000_000
     max_trajectory_steps: int | None = 200_000
+    #: Estimated wall time of one run (:func:`work`), hours on one CPU core, or on
+    #: ``gpu_speedup`` times that speed for a run that may use a GPU.
+    max_job_hours: float | None = 48.0
+    #: How much faster this deployment's workers run a job whose ``training.device`` is `auto` or
+    #: `cuda` than one CPU core; 1 = no GPU (such jobs are then estimated as CPU jobs).
+    gpu_speedup: float = 30.0
+    #: Checkpoints one run may write (``training.total_env_steps / training.checkpoint_every_steps``).
+    max_checkpoints: int | None = 1000
+
+
+def _mlp_flops(widths: list[int]) -> int:
+    """Floating-point operations of one forward pass of a dense network of these layer widths."""
+    return 2 * sum(a * b for a, b in itertools.pairwise(widths))
+
+
+def td3_sample_flops(spec: JobSpec) -> int:
+    """One forward pass of the TD3 actor (the critics are of the same size) for one satellite."""
+    t = spec.training
+    C, F, h = spec.design.grid_size**3, N_FEATURES, list(t.hidden_sizes)
+    if t.network == "per-module":  # the trunk on every cell, two heads
+        return C * (_mlp_flops([F + 3, *h, 3]) + 2 * h[-1] * 3)
+    W = SET_CELL_WIDTH  # a per-cell encoder, the wide layers once, per-cell heads
+    return C * (_mlp_flops([F + 3, W, W]) + _mlp_flops([h[-1] + W, W, 3])) + _mlp_flops([W + 16, *h])
+
+
+@dataclass(frozen=True)
+class Work:
+    """Estimated seconds on one CPU core, by part (:func:`work`)."""
+
+    training_s: float  # the learner: TD3 updates and env steps, or the first-order windows
+    evaluation_s: float  # the curve's evaluations and the final Monte-Carlo, policy and PD
+    design_s: float = 0.0  # `diffsim-codesign`'s design flights
+    setup_s: float = 0.0  # the GA's new runs, one per design
+    checkpoint_s: float = 0.0
+    updates: int = 0  # learner updates (TD3 updates, or first-order windows)
+
+    @property
+    def cpu_seconds(self) -> float:
+        return self.training_s + self.evaluation_s + self.design_s + self.setup_s + self.checkpoint_s
+
+
+def _substeps_s(batches: float, sats: float, slots: int, grad: bool = False) -> float:
+    """Seconds of ``batches`` batched RK4 steps flying ``sats`` satellite-steps in all, ``slots``
+    wheel-unit slots each."""
+    s = batches * CALL_S + sats * (SAT_SUBSTEP_S + slots * SLOT_SUBSTEP_S)
+    return GRAD_FACTOR * s if grad else s
+
+
+def _slots(spec: JobSpec) -> int:
+    fixed = spec.design.fixed_design
+    if fixed is None or spec.algorithm in ("diffsim-codesign", "td3-codesign", "ga") or spec.diffsim.design_pool:
+        return spec.design.grid_size**3  # the designs it flies may hold a unit in every cell
+    return max(1, sum(c >= 2 for c in _cells(fixed)))
+
+
+def work(spec: JobSpec) -> Work:
+    """Estimated wall time of a run of ``spec`` on one CPU core, by part (see the module docstring)."""
+    t, m, e = spec.training, spec.mission, spec.evaluation
+    K, fs, T = _slots(spec), m.frame_skip, m.episode_steps
+    conditions = len(e.conditions)
+    ga = spec.algorithm == "ga"
+    designs = max(1, t.total_env_steps // spec.ga.steps_per_design) if ga else 1
+    per_design_steps = min(spec.ga.steps_per_design, t.total_env_steps) if ga else t.total_env_steps
+    if is_diffsim(spec):
+        d = spec.diffsim
+        sub = fs if d.substeps is None else d.substeps
+        window = d.batch_size * d.window_steps
+        updates = designs * max(1, per_design_steps // window)
+        batches = updates * d.window_steps * sub
+        training = _substeps_s(batches, batches * d.batch_size, K, grad=True)
+        hidden = [7 + 7, *d.hidden_sizes, 3 * K]  # the controller's state in, K wheel units' torques out
+        training += GRAD_FACTOR * updates * window * _mlp_flops(hidden) / FLOPS
+        policy_flops = _mlp_flops(hidden)
+    else:
+        env_batches = t.total_env_steps / t.num_envs
+        training = env_batches * STEP_CALL_S + _substeps_s(env_batches * fs, t.total_env_steps * fs, K)
+        sample = td3_sample_flops(spec)
+        training += t.total_env_steps * sample / FLOPS
+        learning = max(0, per_design_steps - t.learning_starts) * designs
+        updates = learning // t.train_frequency
+        training += updates * (UPDATE_CALL_S + t.batch_size * _UPDATE_PASSES * sample / FLOPS)
+        policy_flops = sample
+    # The curve: one batch of eval_episodes slews per point (per GA design); the final evaluation:
+    # the nominal slews and every condition's, flown by the policy and by PD, for each final design.
+    points = designs * (per_design_steps // t.eval_every_steps + 1)
+    finals = 1
+    design = 0.0
+    if spec.algorithm == "diffsim-codesign":
+        d = spec.diffsim
+        prices = len(spec.objective.trade_off_prices_s_per_kg)
+        finals = max(1, prices) * 4 + (TRADE_OFF_EXTRA_CANDIDATES if prices else 0)
+        draws = max(d.design_batch, 4 * prices)
+        design_updates = max(1, updates // d.design_every)
+        sub = fs if d.substeps is None else d.substeps
+        flights = design_updates * T * sub
+        design = _substeps_s(flights, flights * draws * d.design_slews, K)
+        design += design_updates * T * draws * d.design_slews * policy_flops / FLOPS
+    curve_sats = points * t.eval_episodes * T
+    final_sats = finals * 2 * e.episodes * (1 + conditions) * T
+    batches = (points + finals * 4) * T * fs
+    evaluation = _substeps_s(batches, (curve_sats + final_sats) * fs, K)
+    evaluation += (curve_sats + final_sats) * policy_flops / FLOPS
+    setup = designs * DESIGN_SETUP_S if ga else 0.0
+    n_ckpt = min(t.total_env_steps // t.checkpoint_every_steps, updates if is_diffsim(spec) else t.total_env_steps)
+    replay = (
+        0
+        if is_diffsim(spec)
+        else min(CHECKPOINT_BUFFER_BYTES, replay_capacity(t) * transition_bytes(spec.design.grid_size))
+    )
+    checkpoint = n_ckpt * (CHECKPOINT_S + replay / CHECKPOINT_BYTES_PER_S)
+    return Work(
+        training_s=training,
+        evaluation_s=evaluation,
+        design_s=design,
+        setup_s=setup,
+        checkpoint_s=checkpoint,
+        updates=int(updates),
+    )
+
+
+def job_hours(spec: JobSpec, limits: Limits) -> tuple[float, bool]:
+    """Estimated hours of a run of ``spec`` where ``limits`` apply, and whether a GPU is credited."""
+    gpu = spec.training.device in ("auto", "cuda") and limits.gpu_speedup > 1
+    return work(spec).cpu_seconds / HOUR / (limits.gpu_speedup if gpu else 1.0), gpu
 
 
 def _gib(n: int) -> str:
@@ -283,6 +445,7 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
                 ),
             )
         )
+    out += _work_problems(spec, limits)
     if limits.max_trajectory_steps is not None and e.trajectories * m.episode_steps > limits.max_trajectory_steps:
         out.append(
             (
@@ -295,6 +458,66 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
             )
         )
     return out
+
+
+def _work_problems(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
+    """The work bound (:func:`work`), the checkpoints' count and a GA whose first generation does not fit its budget."""
+    t, out = spec.training, []
+    first = spec.ga.population_size * spec.ga.steps_per_design
+    cap = limits.max_env_steps
+    if spec.algorithm == "ga" and cap is not None and first > max(cap, t.total_env_steps):
+        g = spec.ga
+        out.append(
+            (
+                ("ga", "population_size"),
+                f"ga.population_size: {g.population_size:,} designs of {g.steps_per_design:,} env steps "
+                f"(ga.steps_per_design) are {first:,} env steps for the first generation alone, more than the "
+                f"run's budget (training.total_env_steps {t.total_env_steps:,}) and than this service runs in one "
+                f"job ({cap:,}, MODSAT_MAX_ENV_STEPS): the GA would never select; lower ga.population_size",
+            )
+        )
+    hours, gpu = job_hours(spec, limits)
+    if limits.max_job_hours is not None and hours > limits.max_job_hours:
+        out.append(_hours_problem(spec, limits, hours, gpu))
+    n_ckpt = t.total_env_steps // t.checkpoint_every_steps
+    if limits.max_checkpoints is not None and n_ckpt > limits.max_checkpoints:
+        out.append(
+            (
+                ("training", "checkpoint_every_steps"),
+                f"training.checkpoint_every_steps: {t.checkpoint_every_steps:,} would write {n_ckpt:,} checkpoints "
+                f"over {t.total_env_steps:,} env steps, more than this service stores for one job "
+                f"({limits.max_checkpoints:,}, MODSAT_MAX_CHECKPOINTS); raise it",
+            )
+        )
+    return out
+
+
+def _hours_problem(spec: JobSpec, limits: Limits, hours: float, gpu: bool) -> tuple[tuple[str, ...], str]:
+    t, w = spec.training, work(spec)
+    parts = {
+        ("training", "total_env_steps"): w.training_s + w.setup_s,
+        ("evaluation", "episodes"): w.evaluation_s,
+        ("diffsim", "design_slews"): w.design_s,
+        ("training", "checkpoint_every_steps"): w.checkpoint_s,
+    }
+    loc = max(parts, key=lambda k: parts[k])
+    if loc == ("evaluation", "episodes") and w.evaluation_s and spec.algorithm != "diffsim-codesign":
+        final = 2 * spec.evaluation.episodes * (1 + len(spec.evaluation.conditions))
+        points = t.total_env_steps // t.eval_every_steps + 1
+        if points * t.eval_episodes > final:
+            loc = ("training", "eval_every_steps")
+    verb = "raise" if loc == ("training", "checkpoint_every_steps") or loc[-1] == "eval_every_steps" else "lower"
+    where = f"{limits.gpu_speedup:g}x one CPU core (a GPU, MODSAT_GPU_SPEEDUP)" if gpu else "one CPU core"
+    assert limits.max_job_hours is not None
+    return (
+        loc,
+        f"{'.'.join(loc)}: this run would take about {hours:,.1f} h on {where}, more than this service "
+        f"allows for one job ({limits.max_job_hours:g} h, MODSAT_MAX_JOB_HOURS): training "
+        f"{w.training_s / HOUR:,.1f} h ({w.updates:,} updates), evaluations {w.evaluation_s / HOUR:,.1f} h"
+        + (f", design flights {w.design_s / HOUR:,.1f} h" if w.design_s else "")
+        + (f", {w.setup_s / HOUR:,.1f} h starting GA designs" if w.setup_s else "")
+        + f", checkpoints {w.checkpoint_s / HOUR:,.1f} h (one-core hours); {verb} {'.'.join(loc)}",
+    )
 
 
 def _cells(grid: list) -> list[int]:

@@ -1,6 +1,7 @@
 """The `modsat` command line, run as a real subprocess."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -196,6 +197,7 @@ def test_sigterm_stops_train_at_a_checkpoint_that_resumes(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env={**os.environ, "MODSAT_MAX_CHECKPOINTS": ""},  # a checkpoint every 160 of 200,000 steps: 1,250
     )
     deadline = time.monotonic() + 120
     while not (out / "checkpoint.pt").exists() and time.monotonic() < deadline and p.poll() is None:

@@ -48,9 +48,10 @@ def test_replay_estimate_is_the_issue_figure():
     big = _spec(design={"grid_size": 10}, training={"buffer_size": 500_000, "total_env_steps": 1_000_000})
     est = limits.estimate(big)
     assert est.replay_bytes / 2**30 == pytest.approx(9.36, abs=0.01)  # "9.4 GiB" in the issue
-    ((loc, msg),) = limits.check(big, limits.Limits())
+    no_work_bound = limits.Limits(max_job_hours=None)  # a million updates on a 10^3 grid: over the work bound too
+    ((loc, msg),) = limits.check(big, no_work_bound)
     assert loc == ("training", "buffer_size") and "9.4 GiB" in msg
-    assert limits.check(big, limits.Limits(max_memory_bytes=None)) == []
+    assert limits.check(big, limits.Limits(max_memory_bytes=None, max_job_hours=None)) == []
 
 
 def test_check_cli_is_readable(tmp_path):
