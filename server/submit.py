@@ -19,7 +19,18 @@ from typing import Any
 from fastapi import HTTPException
 from fastapi.responses import JSONResponse
 
-from modsat_core.spec.jobspec import JobSpec, SpecError, parse_spec
+from modsat_core.spec.jobspec import (
+    MAX_ERRORS,
+    MAX_MESSAGE,
+    MAX_QUOTED,
+    JobSpec,
+    SpecError,
+    field_path,
+    parse_spec,
+    quote,
+)
+from modsat_core.spec.limits import Limits
+from modsat_core.spec.limits import check as check_limits
 from modsat_core.spec.overrides import with_overrides
 from modsat_core.spec.presets import PRESETS
 
@@ -33,8 +44,8 @@ class BadRequest(Exception):
 class Invalid(Exception):
     """The body was read but is not a valid submission (422). ``errors`` are FastAPI-style."""
 
-    def __init__(self, errors: list[dict[str, Any]]):
-        self.errors = errors
+    def __init__(self, errors: list[dict[str, Any]], omitted: int = 0):
+        self.errors, self.omitted = errors, omitted  # omitted: problems found but not in ``errors``
         super().__init__("; ".join(e["msg"] for e in errors))
 
 
@@ -56,9 +67,27 @@ def json_content_type(content_type: str | None) -> None:
             raise HTTPException(415, f"send the body as UTF-8 JSON (Content-Type said charset={charset[:40]!r})")
 
 
+def _short_loc(part: Any) -> Any:
+    return part if not isinstance(part, str) or len(part) <= MAX_QUOTED else f"{part[:MAX_QUOTED]}..."
+
+
 def invalid_response(exc: Invalid) -> JSONResponse:
-    """The 422 answer of an :class:`Invalid` submission: FastAPI-style ``detail`` plus ``messages``."""
-    return JSONResponse({"detail": exc.errors, "messages": [e["msg"] for e in exc.errors]}, status_code=422)
+    """The 422 answer of an :class:`Invalid` submission: FastAPI-style ``detail`` plus ``messages``;
+    at most :data:`MAX_ERRORS` problems (and one line counting the rest), each key in a location cut to
+    :data:`MAX_QUOTED` characters and each message to :data:`MAX_MESSAGE`: an answer never echoes a
+    long request."""
+    errors, more = exc.errors[:MAX_ERRORS], max(0, len(exc.errors) - MAX_ERRORS) + exc.omitted
+    if more:
+        errors.append(_error([], f"... and {more} more problems, not listed", "too_many_errors"))
+    detail = [
+        {
+            **e,
+            "loc": [_short_loc(p) for p in e["loc"]],
+            "msg": e["msg"] if len(e["msg"]) <= MAX_MESSAGE else f"{e['msg'][:MAX_MESSAGE]}... (cut)",
+        }
+        for e in errors
+    ]
+    return JSONResponse({"detail": detail, "messages": [e["msg"] for e in detail]}, status_code=422)
 
 
 #: Byte order marks of the encodings that ``json.loads(bytes)`` would otherwise detect and accept.
@@ -85,19 +114,63 @@ def _utf8(raw: bytes) -> str:
         ) from None
 
 
+class _Repeated(dict):
+    """A JSON object that named a key more than once (``repeated`` lists those keys)."""
+
+    repeated: list[str]
+
+
+def _pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    obj = dict(pairs)
+    if len(obj) == len(pairs):
+        return obj
+    seen: set[str] = set()
+    out = _Repeated(obj)
+    out.repeated = [k for k, _ in pairs if k in seen or seen.add(k)]  # type: ignore[func-returns-value]
+    return out
+
+
+def _repeated_keys(value: Any) -> list[dict[str, Any]]:
+    """422 errors for the keys that an object of ``value`` names twice (JSON leaves it undefined which
+    one counts; Python's reader would silently keep the last), at most :data:`MAX_ERRORS`."""
+    errors: list[dict[str, Any]] = []
+    stack: list[tuple[list[Any], Any]] = [([], value)]
+    while stack and len(errors) < MAX_ERRORS:
+        loc, v = stack.pop()
+        if isinstance(v, _Repeated):
+            for key in dict.fromkeys(v.repeated):
+                errors.append(
+                    _error(
+                        [*loc, key],
+                        f"{field_path([*loc, key])}: this key is given more than once in the same object (which one "
+                        "counts is not guessed); give it once",
+                        "duplicate_key",
+                    )
+                )
+        if isinstance(v, dict):
+            stack.extend(([*loc, k], x) for k, x in reversed(v.items()))
+        elif isinstance(v, list):
+            stack.extend(([*loc, i], x) for i, x in reversed(list(enumerate(v))))
+    return errors[:MAX_ERRORS]
+
+
 def decode_json(raw: bytes) -> Any:
-    """The JSON value of a request body; :class:`BadRequest` saying what is wrong otherwise."""
+    """The JSON value of a request body; :class:`BadRequest` saying what is wrong otherwise, and
+    :class:`Invalid` (422) naming a key that an object gives twice."""
     if not raw.strip():
         raise BadRequest('the request body is empty; send a JobSpec or {"preset": NAME} as JSON')
     text = _utf8(raw)
     try:
-        return json.loads(text)
+        value = json.loads(text, object_pairs_hook=_pairs)
     except json.JSONDecodeError as exc:
         raise BadRequest(
             f"the request body is not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
         ) from None
     except (ValueError, RecursionError) as exc:  # e.g. an integer with too many digits, nesting too deep
         raise BadRequest(f"the request body is not usable JSON: {type(exc).__name__}") from None
+    if '"' in text and (repeated := _repeated_keys(value)):
+        raise Invalid(repeated)
+    return value
 
 
 def spec_from_body(body: Any) -> JobSpec:
@@ -118,7 +191,7 @@ def spec_from_body(body: Any) -> JobSpec:
                 [
                     _error(
                         [k],
-                        f"{k}: unknown field next to 'preset'; a preset submission has only "
+                        f"{quote(k)}: unknown field next to 'preset'; a preset submission has only "
                         f"'preset' and 'overrides' (put spec fields inside 'overrides')",
                         "extra_forbidden",
                     )
@@ -128,7 +201,13 @@ def spec_from_body(body: Any) -> JobSpec:
         name, overrides = body["preset"], body.get("overrides", {})
         if not isinstance(name, str) or name not in PRESETS:
             raise Invalid(
-                [_error(["preset"], f"preset: unknown preset {name!r}; known: {', '.join(PRESETS)}", "literal_error")]
+                [
+                    _error(
+                        ["preset"],
+                        f"preset: unknown preset {quote(name)}; known: {', '.join(PRESETS)}",
+                        "literal_error",
+                    )
+                ]
             )
         if overrides is None:
             overrides = {}
@@ -145,10 +224,13 @@ def spec_from_body(body: Any) -> JobSpec:
         if len(locs) != len(exc.messages):
             locs, kinds = [[] for _ in exc.messages], ["value_error" for _ in exc.messages]
         errors = zip(locs, exc.messages, kinds, strict=True)
-        raise Invalid([_error(prefix + loc, msg, kind) for loc, msg, kind in errors]) from None
-    except (ValueError, TypeError, RecursionError) as exc:  # a validator bug must not become a 500
+        raise Invalid([_error(prefix + loc, msg, kind) for loc, msg, kind in errors], exc.omitted) from None
+    except (ValueError, TypeError, RecursionError, AttributeError, KeyError, IndexError):
+        # A validator's bug must not become a 500, nor show its internal text to the client.
         log.exception("spec validation raised unexpectedly")
-        raise Invalid([_error([], f"body: the spec could not be validated: {exc}")]) from None
+        raise Invalid(
+            [_error(prefix, "body: the spec could not be validated (a malformed value the checks did not expect)")]
+        ) from None
     if not prefix and "algorithm" not in body:
         raise Invalid(
             [
@@ -165,4 +247,21 @@ def spec_from_body(body: Any) -> JobSpec:
         raise Invalid(
             [_error([*prefix, "name"], "name: must not contain the NUL character (\\u0000)", "string_pattern_mismatch")]
         )
+    return spec
+
+
+def limit_errors(spec: JobSpec, limits: Limits, prefix: list[Any]) -> list[dict[str, Any]]:
+    """422 errors of a valid spec over this service's limits (memory, work; docs/service.md)."""
+    return [_error([*prefix, *loc], msg, "resource_limit") for loc, msg in check_limits(spec, limits)]
+
+
+def job_from_body(raw: bytes, limits: Limits) -> JobSpec:
+    """A POST /api/jobs body (bytes) as a spec within ``limits``: :class:`BadRequest` or :class:`Invalid`
+    otherwise. CPU-bound (~1-10 ms, more for a large invalid body): the routes run it in a thread,
+    off the event loop, so that no body delays other requests."""
+    body = decode_json(raw)
+    spec = spec_from_body(body)
+    problems = limit_errors(spec, limits, ["overrides"] if "preset" in body else [])
+    if problems:
+        raise Invalid(problems)
     return spec

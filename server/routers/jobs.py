@@ -13,7 +13,6 @@ from fastapi import APIRouter, Header, HTTPException, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
-from modsat_core.spec.limits import check as check_limits
 from worker.store import TERMINAL_STATUSES, QueueFull
 
 from ..deps import SettingsDep, StoreDep, WriteAccess
@@ -32,7 +31,7 @@ from ..schemas import (
     job_summary,
     metrics_point,
 )
-from ..submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
+from ..submit import BadRequest, Invalid, invalid_response, job_from_body, json_content_type
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
@@ -87,15 +86,9 @@ async def submit_job(request: Request, store: StoreDep, settings: SettingsDep) -
     sent as `application/json`. A spec over this service's limits (memory, env steps,
     evaluation; docs/service.md) is 422 naming the field to lower; a full queue is 429."""
     json_content_type(request.headers.get("content-type"))
+    raw = await request.body()
     try:
-        body = decode_json(await request.body())
-        spec = spec_from_body(body)
-        problems = check_limits(spec, settings.limits())
-        if problems:
-            prefix = ["overrides"] if "preset" in body else []  # a valid spec came from a JSON object
-            raise Invalid(
-                [{"loc": ["body", *prefix, *loc], "msg": msg, "type": "resource_limit"} for loc, msg in problems]
-            )
+        spec = await run_in_threadpool(job_from_body, raw, settings.limits())
     except BadRequest as exc:
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:

@@ -14,8 +14,7 @@ from starlette.concurrency import run_in_threadpool
 from modsat_core.artefacts import ArtefactError, CurveFile, CurvePoint
 from modsat_core.evaluation.run_folder import RunFolder
 from modsat_core.evaluation.study_report import FILES, SavedRun, curves_png, saved_run, study, table_markdown
-from modsat_core.spec.jobspec import JobSpec, SpecError
-from modsat_core.spec.limits import check as check_limits
+from modsat_core.spec.jobspec import JobSpec, SpecError, quote
 from modsat_core.spec.study import (
     DEFAULT_ALGORITHMS,
     algorithm_problem,
@@ -27,7 +26,7 @@ from worker.store import QueueFull
 
 from ..deps import SettingsDep, StoreDep, WriteAccess
 from ..schemas import Digits, StudyDetail, StudyId, StudyJob, StudyList, StudySummary, _time
-from ..submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, spec_from_body
+from ..submit import BadRequest, Invalid, decode_json, invalid_response, json_content_type, limit_errors, spec_from_body
 
 router = APIRouter(prefix="/api/studies", tags=["studies"])
 
@@ -44,7 +43,14 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
     extra = sorted(set(body) - {"spec", "seeds", "algorithms"})
     if extra:
         raise Invalid(
-            [{"loc": ["body", k], "msg": f"{k}: unknown field of a study", "type": "extra_forbidden"} for k in extra]
+            [
+                {
+                    "loc": ["body", k],
+                    "msg": f"{quote(k)}: unknown field of a study; it has spec, seeds and algorithms",
+                    "type": "extra_forbidden",
+                }
+                for k in extra
+            ]
         )
     if "spec" not in body:
         raise Invalid([{"loc": ["body", "spec"], "msg": "spec: required (a JobSpec or a preset)", "type": "missing"}])
@@ -52,7 +58,7 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
     try:
         base = spec_from_body(body["spec"])
     except Invalid as exc:
-        raise Invalid([{**e, "loc": ["body", "spec", *e["loc"][1:]]} for e in exc.errors]) from None
+        raise Invalid([{**e, "loc": ["body", "spec", *e["loc"][1:]]} for e in exc.errors], exc.omitted) from None
     seeds, algs = body.get("seeds"), body.get("algorithms", list(DEFAULT_ALGORITHMS))
     for key, problem in (("seeds", seed_problem(seeds)), ("algorithms", algorithm_problem(algs))):
         if problem:
@@ -66,14 +72,9 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
         msg = "algorithms: " + "; ".join(exc.messages)
         raise Invalid([{"loc": ["body", "algorithms"], "msg": msg, "type": "value_error"}]) from None
     for spec in specs[:: len(seeds)]:  # one per algorithm: the seed does not change the limits
-        problems = check_limits(spec, settings.limits())
+        problems = limit_errors(spec, settings.limits(), ["spec", *prefix])
         if problems:
-            raise Invalid(
-                [
-                    {"loc": ["body", "spec", *prefix, *loc], "msg": msg, "type": "resource_limit"}
-                    for loc, msg in problems
-                ]
-            )
+            raise Invalid(problems)
     return base, seeds, algs, specs
 
 
@@ -104,8 +105,10 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
 async def submit_study(request: Request, store: StoreDep, settings: SettingsDep) -> JSONResponse:
     """Queue one job per seed and algorithm, all or none. A study over the queue's room is 429."""
     json_content_type(request.headers.get("content-type"))
+    raw = await request.body()
     try:
-        base, seeds, algs, specs = _job_specs(decode_json(await request.body()), settings)
+        # CPU-bound (decoding, validating, the limits): in a thread, so that no body delays other requests.
+        base, seeds, algs, specs = await run_in_threadpool(lambda: _job_specs(decode_json(raw), settings))
     except BadRequest as exc:
         raise HTTPException(400, str(exc)) from None
     except Invalid as exc:
