@@ -16,7 +16,7 @@ from typing import Any
 from fastapi import APIRouter, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
-from fastapi.responses import JSONResponse
+from fastapi.responses import HTMLResponse, JSONResponse
 from fastapi.routing import APIRoute
 from sqlalchemy.exc import OperationalError, SQLAlchemyError
 from sqlalchemy.exc import TimeoutError as SQLAlchemyTimeoutError
@@ -27,6 +27,7 @@ import modsat_core
 from modsat_core.spec.jobspec import JobSpec
 from worker.store import JobStore
 
+from . import api_docs
 from .hosting import mount_static, start_viewer
 from .routers.archive import router as archive_router
 from .routers.jobs import router as jobs_router
@@ -173,6 +174,22 @@ _WRITES: dict[str, dict[str, str]] = {
 }
 
 
+#: pydantic's keywords that FastAPI leaves in a query parameter's schema when the type carries a
+#: validator of its own (``Digits``), and the JSON Schema keywords they mean.
+_BOUND_KEYWORDS = {"ge": "minimum", "le": "maximum", "gt": "exclusiveMinimum", "lt": "exclusiveMaximum"}
+
+
+def _standard_bounds(node: dict[str, Any]) -> None:
+    """Rename pydantic's ``ge``/``le``/``gt``/``lt`` in a parameter's schema to JSON Schema's keywords,
+    onto the integer branch of an optional one (a client reads only the standard ones)."""
+    bounds = {_BOUND_KEYWORDS[k]: node.pop(k) for k in list(node) if k in _BOUND_KEYWORDS}
+    if not bounds:
+        return
+    targets = [b for b in node.get("anyOf", []) if b.get("type") in ("integer", "number")] or [node]
+    for target in targets:
+        target.update(bounds)
+
+
 def _openapi(app: FastAPI, token: bool):
     """The generated schema, plus JobSpec (the submit body is read by hand, so FastAPI does not see it)."""
 
@@ -192,6 +209,8 @@ def _openapi(app: FastAPI, token: bool):
         }
         for ops in schema.get("paths", {}).values():
             for method, op in ops.items():
+                for param in op.get("parameters", []):
+                    _standard_bounds(param.get("schema", {}))
                 responses = op.setdefault("responses", {})
                 for code, response in (_EVERY_OPERATION | (_WRITES if method in ("post", "delete") else {})).items():
                     responses.setdefault(code, response)
@@ -242,7 +261,7 @@ def create_app(
         description="Submit co-design training runs of modular satellites, follow them, download the results. "
         "See docs/service.md.",
         openapi_url="/api/openapi.json",
-        docs_url="/api/docs",
+        docs_url=None,  # Swagger UI comes from a CDN: /api/docs is a page of our own (server/api_docs.py)
         redoc_url=None,
     )
     app.state.settings = settings
@@ -252,6 +271,11 @@ def create_app(
     routers = [jobs_router, archive_router, studies_router, service_router(), viewer_router()]
     for router in routers:
         app.include_router(router)
+
+    @app.get("/api/docs", include_in_schema=False)
+    def api_docs_page() -> HTMLResponse:
+        return HTMLResponse(api_docs.render(app.openapi()), headers={"Content-Security-Policy": api_docs.CSP})
+
     app.include_router(_api_not_found(routers))
     mount_static(app, settings)
 

@@ -271,6 +271,8 @@ class StudySubmission(BaseModel):
     """A study: ``spec`` (a JobSpec, or ``{"preset": NAME, "overrides": {...}}``) flown once per
     seed and algorithm; every job is the spec with its own ``seed`` and ``algorithm``."""
 
+    model_config = ConfigDict(extra="forbid")  # as the server reads it: an unknown field is 422
+
     spec: dict[str, Any] = Field(description='A JobSpec, or {"preset": NAME, "overrides": {...}}.')
     seeds: list[Annotated[int, Field(ge=0, lt=2**31)]] = Field(
         min_length=1,

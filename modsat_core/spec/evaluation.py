@@ -23,7 +23,7 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
-from modsat_core.spec.parts import resolve_named
+from modsat_core.spec.parts import named_items, resolve_named
 from modsat_core.spec.sections import _Section
 
 _NAME = re.compile(r"^[a-z0-9][a-z0-9-]{0,39}$")
@@ -33,7 +33,11 @@ class Condition(_Section):
     """One set of departures from the nominal flight (all zero / one: the nominal flight)."""
 
     name: str = Field(
-        "custom", min_length=1, max_length=40, description="Lower-case letters, digits and '-'; unique in a list."
+        "custom",
+        min_length=1,
+        max_length=40,
+        description="Lower-case letters, digits and '-'; unique in a list.",
+        json_schema_extra={"pattern": _NAME.pattern},
     )
     attitude_noise_deg: float = Field(
         0.0,
@@ -90,8 +94,8 @@ class Condition(_Section):
     @field_validator("name")
     @classmethod
     def _name(cls, v: str) -> str:
-        if not _NAME.match(v):
-            raise ValueError(f"condition name {v!r}: use lower-case letters, digits and '-' (at most 40)")
+        if not _NAME.fullmatch(v):  # fullmatch: "$" alone would let a trailing newline through
+            raise ValueError(f"condition name {v[:60]!r}: use lower-case letters, digits and '-' (at most 40)")
         if v == "nominal":
             raise ValueError("'nominal' names the evaluation's own slews; give the condition another name")
         return v
@@ -191,6 +195,7 @@ class Evaluation(_Section):
     conditions: list[Condition] = Field(
         default_factory=lambda: list(STANDARD_CONDITIONS.values()),
         max_length=20,
+        json_schema_extra=named_items(list(STANDARD_CONDITIONS)),
         description=(
             "Flight conditions the final evaluation also flies, the policy and PD on the same slews "
             "(docs/robustness.md): objects, or the names of standard ones ("

@@ -32,7 +32,12 @@ class _Part(BaseModel):
 class WheelType(_Part):
     """One reaction wheel as its datasheet gives it (a wheel unit holds three, one per body axis)."""
 
-    name: str = Field(min_length=1, max_length=40, description="Lower-case letters, digits, '.' and '-'.")
+    name: str = Field(
+        min_length=1,
+        max_length=40,
+        description="Lower-case letters, digits, '.' and '-'.",
+        json_schema_extra={"pattern": _NAME.pattern},
+    )
     torque_Nm: float = Field(gt=0.0, le=10.0, description="Peak torque of one wheel, N m.")
     momentum_Nms: float = Field(gt=0.0, le=1000.0, description="Momentum capacity of one wheel, N m s.")
     mass_kg: float = Field(gt=0.0, le=100.0, description="Mass of one wheel (with its own housing), kg.")
@@ -50,8 +55,8 @@ class WheelType(_Part):
     @field_validator("name")
     @classmethod
     def _name(cls, v: str) -> str:
-        if not _NAME.match(v):
-            raise ValueError(f"wheel name {v!r}: use lower-case letters, digits, '.' and '-' (at most 40)")
+        if not _NAME.fullmatch(v):  # fullmatch: "$" alone would let a trailing newline through
+            raise ValueError(f"wheel name {v[:60]!r}: use lower-case letters, digits, '.' and '-' (at most 40)")
         return v
 
 
@@ -105,6 +110,18 @@ def resolve_named(items: list[Any], library: dict[str, Any], kind: str) -> list[
     if repeated:
         raise ValueError(f"{kind} names must be unique; repeated: {', '.join(repeated)}")
     return out
+
+
+def named_items(names: list[str]) -> Any:
+    """``json_schema_extra`` of a list field whose items are objects or the names of library entries
+    (:func:`resolve_named`): the schema says so, with the names it takes."""
+
+    def extra(schema: dict[str, Any]) -> None:
+        for node in [schema, *schema.get("anyOf", [])]:
+            if node.get("type") == "array" and "items" in node:
+                node["items"] = {"anyOf": [node["items"], {"type": "string", "enum": list(names)}]}
+
+    return extra
 
 
 def resolve_wheels(items: list[Any]) -> list[Any]:

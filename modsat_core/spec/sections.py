@@ -11,7 +11,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from modsat_core.grid import MAX_CELL, MAX_WHEEL_TYPES, validity_problem
-from modsat_core.spec.parts import WHEEL_LIBRARY, Payload, WheelType, resolve_wheels
+from modsat_core.spec.parts import WHEEL_LIBRARY, Payload, WheelType, named_items, resolve_wheels
 
 # Numbers that appear in several places of the spec.
 PAPER_TAU_3X3X3_NM = 0.8
@@ -117,6 +117,7 @@ class ModuleCatalog(_Section):
     wheels: list[WheelType] | None = Field(
         None,
         max_length=MAX_WHEEL_TYPES,
+        json_schema_extra=named_items(list(WHEEL_LIBRARY)),
         description=(
             "The parts catalog's wheel types (docs/requirements.md): objects, or the names of library wheels ("
             + ", ".join(f"`{n}`" for n in WHEEL_LIBRARY)
