@@ -137,10 +137,39 @@ def _paper(n: int, tau: float, algorithm: str) -> JobSpec:
     )
 
 
-def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float, episode_steps: int = 360) -> JobSpec:
+#: The wheels of the CubeSat trade-offs, and of the bigger ones (a microsatellite wheel beside them).
+_CUBESAT_WHEELS = ["bct-rwp015", "nanoavionics-rw0"]
+_ALL_WHEELS = [*_CUBESAT_WHEELS, "honeywell-hr12-12"]
+
+
+def _trade_off(
+    n: int,
+    updates: int,
+    requirements: dict,
+    payload_kg: float,
+    episode_steps: int = 360,
+    *,
+    wheels: list[str] = _CUBESAT_WHEELS,
+    prices: tuple[float, ...] = (0.1, 0.3, 1.0, 3.0),
+    control_every: int | None = None,
+    big: bool = False,
+) -> JobSpec:
     """A trade-off preset (docs/requirements.md): a payload plate (the k = 0 layer, ``payload_kg`` a cell),
-    0.2 kg structure modules, wheel units of two real CubeSat wheels, `requirements`, four mass prices,
-    trained under the flight conditions."""
+    0.2 kg structure modules, wheel units of ``wheels``, `requirements`, the mass ``prices``, trained under
+    the flight conditions. ``big`` (7x7x7 and up): slow satellites, so the mission's physics steps at
+    1/60 s (``control_every`` of them a control step) and training slews last 400 control steps; the design
+    distribution starts sparse (each free cell empty at 90 %)."""
+    mission: dict = {
+        "slew_min_deg": 30.0,
+        "slew_max_deg": 90.0,
+        "tolerance_deg": 0.25,
+        "episode_steps": episode_steps,
+        "reward": _HOLD_REWARD,
+    }
+    extra: dict = {}
+    if big:
+        mission.update(physics_dt_s=1.0 / 60.0, frame_skip=control_every)
+        extra["diffsim"] = {"episode_steps": 400, "design_empty_prior": 0.9}
     return JobSpec.model_validate(
         {
             "name": f"trade-off-{n}x{n}x{n}",
@@ -148,20 +177,15 @@ def _trade_off(n: int, updates: int, requirements: dict, payload_kg: float, epis
             "design": {"grid_size": n},
             "modules": {
                 "module_mass_kg": 0.2,
-                "wheels": ["bct-rwp015", "nanoavionics-rw0"],
+                "wheels": wheels,
                 "payload": {"cells": [[i, j, 0] for i in range(n) for j in range(n)], "mass_kg": payload_kg},
             },
-            "mission": {
-                "slew_min_deg": 30.0,
-                "slew_max_deg": 90.0,
-                "tolerance_deg": 0.25,
-                "episode_steps": episode_steps,
-                "reward": _HOLD_REWARD,
-            },
+            "mission": mission,
             "requirements": requirements,
-            "objective": {"trade_off_prices_s_per_kg": [0.1, 0.3, 1.0, 3.0]},
+            "objective": {"trade_off_prices_s_per_kg": list(prices)},
             "randomise": FLIGHT_READY,
             "training": _first_order_budget(updates),
+            **extra,
         }
     )
 
@@ -272,6 +296,41 @@ PRESETS: dict[str, JobSpec] = {
         },
         payload_kg=0.5,
         episode_steps=480,
+    ),
+    # The bigger grids: a 0.7 m and a 1 m satellite, where a microsatellite wheel (Honeywell HR12) joins the
+    # CubeSat ones: a unit of three weighs 18.2 kg and turns 50 times harder than a CubeSat unit.
+    "trade-off-7x7x7": _trade_off(
+        7,
+        240,
+        {
+            "slew_max_deg": 90.0,
+            "tolerance_deg": 0.25,
+            "settling_time_s": 30.0,
+            "success": 0.99,
+            "mass_budget_kg": 45.0,
+        },
+        payload_kg=0.5,
+        episode_steps=600,
+        wheels=_ALL_WHEELS,
+        prices=(0.03, 0.1, 0.3, 1.0),
+        control_every=5,
+        big=True,
+    ),
+    "trade-off-10x10x10": _trade_off(
+        10,
+        240,
+        {
+            "slew_max_deg": 90.0,
+            "tolerance_deg": 0.25,
+            "settling_time_s": 60.0,
+            "success": 0.99,
+            "mass_budget_kg": 80.0,
+        },
+        payload_kg=0.3,
+        episode_steps=600,
+        wheels=_ALL_WHEELS,
+        control_every=10,
+        big=True,
     ),
 }
 
