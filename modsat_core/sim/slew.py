@@ -258,7 +258,9 @@ class SlewSim:
             actuator_mask=torch.cat([p.actuator_mask, p.actuator_mask.new_zeros(self.B, pad)], dim=1),
             momentum_weight=None if mw is None else torch.cat([mw, mw.new_zeros(self.B, pad)], dim=1),
         )
-        self.state = dyn.State(st.q_BN, st.omega_B, torch.cat([st.h_B, st.h_B.new_zeros(self.B, pad, 3)], dim=1), st.t_s)
+        self.state = dyn.State(
+            st.q_BN, st.omega_B, torch.cat([st.h_B, st.h_B.new_zeros(self.B, pad, 3)], dim=1), st.t_s
+        )
         self.K = K
 
     # ------------------------------------------------------------------ reset / observe

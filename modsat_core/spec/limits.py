@@ -462,7 +462,8 @@ def check(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
 
 def _work_problems(spec: JobSpec, limits: Limits) -> list[tuple[tuple[str, ...], str]]:
     """The work bound (:func:`work`), the checkpoints' count and a GA whose first generation does not fit its budget."""
-    t, out = spec.training, []
+    t = spec.training
+    out: list[tuple[tuple[str, ...], str]] = []
     first = spec.ga.population_size * spec.ga.steps_per_design
     cap = limits.max_env_steps
     if spec.algorithm == "ga" and cap is not None and first > max(cap, t.total_env_steps):

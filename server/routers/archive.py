@@ -74,7 +74,7 @@ class _Sink:
 
 def _zip_stream(store, job_id: int, folder: str, files: list[dict[str, Any]]) -> Iterator[bytes]:
     sink = _Sink()
-    with zipfile.ZipFile(sink, "w", allowZip64=True) as zf:  # type: ignore[arg-type]  # a non-seekable sink
+    with zipfile.ZipFile(sink, "w", allowZip64=True) as zf:  # type: ignore[call-overload]  # a non-seekable sink
         for f in files:
             method = zipfile.ZIP_STORED if f["name"].endswith(_STORED) else zipfile.ZIP_DEFLATED
             info = zipfile.ZipInfo(f"{folder}/{f['name']}", date_time=(2024, 1, 1, 0, 0, 0))
