@@ -126,6 +126,7 @@ class ProgressRecord(Record):
     total_env_steps: int | None = None
     updates: int | None = None
     phase: str | None = Field(None, description="training | evaluating, or 'ga generation G, design D'.")
+    stage: str | None = Field(None, description="evaluating: what the final evaluation flies now.")
     eval: CurvePoint | None = Field(None, description="A learning-curve point, when one was just evaluated.")
     train_episodes: int | None = Field(None, description="Training episodes finished since the last record.")
     train_mean_return: float | None = None

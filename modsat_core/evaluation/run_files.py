@@ -232,11 +232,17 @@ def curve_png(curve: list[dict], title: str) -> bytes:
 
 
 def run_files(
-    spec: JobSpec, curve: list[dict], actor: torch.nn.Module, grid: np.ndarray, extra: dict | None = None
+    spec: JobSpec,
+    curve: list[dict],
+    actor: torch.nn.Module,
+    grid: np.ndarray,
+    extra: dict | None = None,
+    on_stage: Callable[[int, int, str], None] | None = None,
 ) -> tuple[dict[str, bytes], dict]:
-    """All output files of a finished run, and a short summary of its evaluation."""
+    """All output files of a finished run, and a short summary of its evaluation (``on_stage``: as
+    :func:`final_evaluation`'s)."""
 
-    raw = final_evaluation(actor, grid, spec)
+    raw = final_evaluation(actor, grid, spec, on_stage=on_stage)
     traj = Trajectories.model_validate(raw.pop("trajectories"))
     ev = EvaluationReport.model_validate(raw)
     design = design_report(grid, spec)

@@ -29,6 +29,7 @@ middle price (the final evaluation says then that no front point meets them, wit
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -174,6 +175,8 @@ class ParetoRun(DiffsimRun):
         #: The non-dominated draws of the whole run over (mass, median settling on their design slews),
         #: among those that landed every slew: {"grid", "mass_kg", "settling_s", "price"}, lightest first.
         self.archive: list[dict] = []
+        #: Told what the front's evaluation flies next (train() reports it as the evaluation's stage).
+        self.on_stage: Callable[[str], None] = lambda _what: None
         super().__init__(spec, device)
 
     # ------------------------------------------------------------------ the distributions
@@ -258,7 +261,9 @@ class ParetoRun(DiffsimRun):
         self.active = (start, len(self.pool))
         self.records.append(record)
 
-    def update_archive(self, grids: list[np.ndarray], flown: list[list[dict]], prices: list[float], episode_s: float) -> None:
+    def update_archive(
+        self, grids: list[np.ndarray], flown: list[list[dict]], prices: list[float], episode_s: float
+    ) -> None:
         """Add the draws that landed every slew to the archive and keep its non-dominated set."""
         pts = list(self.archive)
         for g, eps, price in zip(grids, flown, prices, strict=True):
@@ -289,7 +294,11 @@ class ParetoRun(DiffsimRun):
             idx = np.unique(np.round(np.linspace(0, len(picked) - 1, ARCHIVE_CANDIDATES)).astype(int))
             picked = [picked[i] for i in idx]
         out: list[tuple[np.ndarray, float]] = []
-        found = [(g, price) for l, price in enumerate(self.prices) for g in [self.mode(l), *[b["grid"] for b in self.best[l]]]]
+        found = [
+            (g, price)
+            for l, price in enumerate(self.prices)
+            for g in [self.mode(l), *[b["grid"] for b in self.best[l]]]
+        ]
         for g, price in found + [(p["grid"], p["price"]) for p in picked]:
             if (g >= ACTUATOR).any() and not any(np.array_equal(g, u) for u, _ in out):
                 out.append((g, price))
@@ -302,6 +311,7 @@ class ParetoRun(DiffsimRun):
         episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
         cands = self.candidates() or [(self.grid, self.prices[len(self.prices) // 2])]
         pol = copy.deepcopy(policy).cpu().double().eval()
+        self.on_stage(f"the trade-off: {len(cands)} candidate designs on {ev.episodes} validation slews")
         flown = fly(spec, pol, [g for g, _ in cands], ev.episodes, ev.seed + 1, exact=True)
         records = []
         for (g, price), episodes in zip(cands, flown, strict=True):
@@ -333,6 +343,8 @@ class ParetoRun(DiffsimRun):
         front = sorted([r for r, k in zip(pool, nondominated(pts), strict=True) if k], key=lambda r: r["mass_kg"])
         for r in front:
             if "conditions" not in r:
+                n = len(self.spec.evaluation.conditions)
+                self.on_stage(f"the trade-off: front design of {r['mass_kg']:.2f} kg under {n} flight conditions")
                 self.fly_conditions(r, pol)
         return front
 

@@ -92,15 +92,24 @@ def train(
     stopped = run.run(on_progress, wrap, should_stop)
     if stopped:
         return RunResult(stopped=True, env_steps=run.env_steps, curve=run.curve)
-    on_progress(
-        ProgressRecord(
-            env_steps=run.env_steps,
-            total_env_steps=spec.training.total_env_steps,
-            updates=run.updates,
-            phase="evaluating",
-            eval=None,
-        ).to_dict()
-    )
+
+    def evaluating(stage: str | None) -> None:
+        on_progress(
+            ProgressRecord(
+                env_steps=run.env_steps,
+                total_env_steps=spec.training.total_env_steps,
+                updates=run.updates,
+                phase="evaluating",
+                stage=stage,
+                eval=None,
+            ).to_dict()
+        )
+
+    evaluating(None)
+    if isinstance(run, ParetoRun):  # the front's flights come first, and take the longest
+        run.on_stage = evaluating
     actor, grid, chosen = run.chosen()
-    files, summary = run_files(spec, run.curve, actor, grid, chosen)
+    files, summary = run_files(
+        spec, run.curve, actor, grid, chosen, on_stage=lambda i, n, what: evaluating(f"{i}/{n}: {what}")
+    )
     return RunResult(stopped=False, env_steps=run.env_steps, curve=run.curve, files=files, summary=summary)

@@ -80,7 +80,13 @@ def test_an_empty_prior_starts_every_distribution_sparse():
 
 def test_a_trade_off_run_returns_its_front_keeps_the_lightest_that_meets_and_resumes_the_same():
     spec = tiny_trade_off()
-    files = train(spec).artifacts()
+    records: list[dict] = []
+    files = train(spec, on_progress=records.append).artifacts()
+    # the final evaluation says what it flies: the candidates, each front design under the conditions, then
+    # the kept design's four stages
+    stages = [r["stage"] for r in records if r.get("phase") == "evaluating" and r.get("stage")]
+    assert "candidate designs" in stages[0] and "under 2 flight conditions" in stages[1]
+    assert [s[:4] for s in stages[-4:]] == ["1/4:", "2/4:", "3/4:", "4/4:"]
     curve = json.loads(files["curve.json"])
     front, selection = curve["front"], curve["selection"]
     assert front and len(curve["designs"]) == 3 and len(curve["designs"][0]["prices"]) == 2

@@ -87,6 +87,17 @@ def test_an_eta_while_training_then_the_evaluation_as_its_own_state(jobs, new_pa
     text = page.text_content("#d-progress")
     assert "Final evaluation" in text and "training took 5 min" in text, text
     assert page.text_content("#d-eta") == ""
+    j.store.publish_progress(  # the evaluation's stage, as train() reports it
+        ids["running_claim"],
+        ProgressRecord(
+            env_steps=TOTAL,
+            total_env_steps=TOTAL,
+            phase="evaluating",
+            stage="3/4: the policy on 100 slews",
+            elapsed_s=300.0,
+        ).to_dict(),
+    )
+    page.wait_for_function("document.getElementById('d-progress').textContent.includes('3/4: the policy on 100 slews')")
     page.screenshot(path=str(screenshot_dir() / "evaluating-desktop.png"), full_page=True)
 
 

@@ -531,8 +531,11 @@ function renderProgress(p, m) {
   if (evaluating) {
     const ev = evaluationRecord();
     const since = ev && ev.time ? (Date.now() - Date.parse(ev.time)) / 1000 : null;
-    $("d-progress").textContent = "Final evaluation: flying the policy and the PD baseline on the evaluation's "
-      + "slews, nominal and under each flight condition" + (since != null ? ` \u00b7 ${fmt.dur(since)} so far` : "")
+    // the latest record says what it flies now (a trade-off's front first, then the kept design's stages)
+    const now = state.records.filter((r) => r.phase === "evaluating" && r.stage).pop();
+    $("d-progress").textContent = "Final evaluation: " + (now ? `flying ${now.stage}`
+      : "flying the policy and the PD baseline on the evaluation's slews, nominal and under each flight condition")
+      + (since != null ? ` \u00b7 ${fmt.dur(since)} so far` : "")
       + (ev && ev.elapsed_s != null ? ` \u00b7 training took ${fmt.dur(ev.elapsed_s)}` : "");
     return;
   }
