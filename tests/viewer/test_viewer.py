@@ -10,8 +10,18 @@ import pytest
 
 from modsat_core.artefacts import ArtefactError, DesignReport, Trajectories
 from web.viewer.recording import RECORDING_NAME, add_recording, recording_bytes, recording_html
-from web.viewer.run import Episode, RunData
-from web.viewer.scene import ACTUATOR_SRGB, Voxels, side_by_side_positions, srgb_to_linear
+from web.viewer.run import Episode, RunData, payload_cells
+from web.viewer.scene import (
+    ACTUATOR_SRGB,
+    PAYLOAD_OPACITY,
+    PAYLOAD_SRGB,
+    STRUCTURE_OPACITY,
+    STRUCTURE_SRGB,
+    Voxels,
+    draw_satellite,
+    side_by_side_positions,
+    srgb_to_linear,
+)
 
 GRID = [[[1, 2, 0], [0, 1, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, 0], [0, 0, 0]]]
 
@@ -62,6 +72,95 @@ def test_voxels_are_centred_on_the_centre_of_mass_and_coloured_by_type():
     assert seg.shape == (28, 2, 3)
     assert np.allclose(np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1), 1.0)
     assert Voxels.from_grid(np.zeros((2, 2, 2))).edge_segments().shape == (0, 2, 3)
+
+
+#: A 3x3x3 design with a payload plate on k = 0 and one wheel unit at the centre.
+PLATE_GRID = np.ones((3, 3, 3), dtype=int)
+PLATE_GRID[1, 1, 1] = 2
+PLATE = [[i, j, 0] for i in range(3) for j in range(3)]
+
+
+class _Scene:
+    """Records what draw_satellite asks of a viser scene."""
+
+    def __init__(self):
+        self.meshes: dict[str, dict] = {}
+        self.removed: list[str] = []
+
+    def add_frame(self, name, **kw):
+        return type("Frame", (), {"wxyz": kw.get("wxyz")})()
+
+    def add_batched_meshes_simple(self, name, vertices, faces, wxyzs, positions, **kw):
+        self.meshes[name] = {"positions": np.asarray(positions), **kw}
+
+    def remove_by_name(self, name):
+        self.removed.append(name)
+        self.meshes.pop(name, None)
+
+    def add_line_segments(self, *a, **kw):
+        pass
+
+    def add_label(self, *a, **kw):
+        pass
+
+
+def test_payload_cells_are_read_from_the_spec_as_plain_data():
+    assert payload_cells({"modules": {"payload": {"cells": [[0, 0, 0], [1, 0, 0]], "mass_kg": 2.0}}}) == [
+        (0, 0, 0),
+        (1, 0, 0),
+    ]
+    assert payload_cells({"objective": {"payload_cells": [[2, 1, 0]]}}) == [(2, 1, 0)], "an older co-design spec"
+    both = {"modules": {"payload": {"cells": [[0, 0, 0]]}}, "objective": {"payload_cells": [[0, 0, 0]]}}
+    assert payload_cells(both) == [(0, 0, 0)]
+    for spec in (None, {}, {"modules": None}, {"modules": {"payload": None}}, {"objective": {"payload_cells": []}}):
+        assert payload_cells(spec) == [], spec
+    odd = {"objective": {"payload_cells": [[0, 0], "x", [1, 2, 3.5], [True, 0, 0], [1, 1, 1]]}}
+    assert payload_cells(odd) == [(1, 1, 1)], "what is not three integers is skipped, not raised"
+    files = _files()
+    spec = {"name": "plate", "algorithm": "diffsim-codesign", "modules": {"payload": {"cells": PLATE, "mass_kg": 1}}}
+    run = RunData.from_json(DesignReport.of(PLATE_GRID.tolist()).to_json(), files["trajectories.json"], spec=spec)
+    assert run.payload_cells == [tuple(c) for c in PLATE]
+    assert RunData.from_json(files["design.json"], files["trajectories.json"]).payload_cells == []
+
+
+def test_payload_cells_get_their_own_colour_and_the_actuator_stays_orange():
+    vox = Voxels.from_grid(PLATE_GRID, [*PLATE, [1, 1, 1], [5, 5, 5]])  # the wheel unit and a cell outside: not payload
+    cells = np.argwhere(PLATE_GRID > 0)
+    on_plate = cells[:, 2] == 0
+    assert vox.is_payload.tolist() == on_plate.tolist()
+    colors = vox.colors_linear
+    assert np.allclose(colors[vox.is_payload], srgb_to_linear(PAYLOAD_SRGB))
+    assert np.allclose(colors[vox.types == 2], srgb_to_linear(ACTUATOR_SRGB))
+    rest = ~vox.is_payload & (vox.types == 1)
+    assert rest.sum() == 27 - 9 - 1 and np.allclose(colors[rest], srgb_to_linear(STRUCTURE_SRGB))
+    assert not np.allclose(srgb_to_linear(PAYLOAD_SRGB), srgb_to_linear(STRUCTURE_SRGB))
+
+    scene = _Scene()
+    draw_satellite(scene, "/A", PLATE_GRID, payload=PLATE)
+    m = scene.meshes
+    assert len(m["/A/body/payload"]["positions"]) == 9 and m["/A/body/payload"]["opacity"] == PAYLOAD_OPACITY
+    assert np.allclose(m["/A/body/payload"]["batched_colors"], srgb_to_linear(PAYLOAD_SRGB))
+    assert PAYLOAD_OPACITY > STRUCTURE_OPACITY, "the plate less translucent than structure"
+    assert len(m["/A/body/structure"]["positions"]) == 17
+    assert np.allclose(m["/A/body/structure"]["batched_colors"], srgb_to_linear(STRUCTURE_SRGB))
+    assert len(m["/A/body/voxels"]["positions"]) == 1 and m["/A/body/voxels"]["opacity"] is None
+    assert np.allclose(m["/A/body/voxels"]["batched_colors"], srgb_to_linear(ACTUATOR_SRGB))
+    assert len(m["/A/target/ghost"]["positions"]) == 27
+
+    draw_satellite(scene, "/A", PLATE_GRID)  # redrawn without a payload: as before, no payload mesh
+    assert "/A/body/payload" not in scene.meshes and "/A/body/payload" in scene.removed
+    assert len(scene.meshes["/A/body/structure"]["positions"]) == 26
+    assert np.allclose(scene.meshes["/A/body/structure"]["batched_colors"], srgb_to_linear(STRUCTURE_SRGB))
+
+
+def test_no_payload_draws_as_before():
+    vox, marked = Voxels.from_grid(GRID), Voxels.from_grid(GRID, [])
+    assert vox.payload is None and not vox.is_payload.any() and marked.payload is None
+    assert np.allclose(vox.colors_linear, marked.colors_linear)
+    scene = _Scene()
+    draw_satellite(scene, "/A", GRID)
+    assert set(scene.meshes) == {"/A/body/voxels", "/A/body/structure", "/A/target/ghost"}
+    assert not np.isclose(scene.meshes["/A/target/ghost"]["batched_colors"], srgb_to_linear(PAYLOAD_SRGB)).all(1).any()
 
 
 def test_side_by_side_placements_do_not_overlap():
@@ -122,6 +221,11 @@ def test_recording_is_a_viser_file_of_the_slews():
     assert not add_recording({"spec.json": b"{}"}), "no design, no recording"
     broken = {"design.json": b"not json", "trajectories.json": b"{}"}
     assert not add_recording(broken) and RECORDING_NAME not in broken, "a failure never raises"
+    plate = {"name": "plate", "algorithm": "diffsim-codesign", "objective": {"payload_cells": PLATE}}
+    design = DesignReport.of(PLATE_GRID.tolist()).to_json()
+    with_payload = recording_bytes(design, files["trajectories.json"], spec_json=json.dumps(plate).encode())
+    without = recording_bytes(design, files["trajectories.json"], spec_json=json.dumps({"name": "plate"}).encode())
+    assert len(with_payload) > len(without), "the payload is a mesh of its own in the recording"
 
 
 def test_a_1000_cell_design_is_drawn_and_recorded():
@@ -149,6 +253,8 @@ def test_live_viewer_sessions(tmp_path):
         d.mkdir()
         for k, v in _files().items():
             (d / k).write_bytes(v)
+    # Run b carries a payload (an older co-design spec's form): its first cell is drawn as payload.
+    (tmp_path / "b" / "spec.json").write_text(json.dumps({"name": "b", "objective": {"payload_cells": [[0, 0, 0]]}}))
     app = ViewerApp(DirRuns([tmp_path / "a", tmp_path / "b"]), port=0)
     try:
         assert app.port > 0
@@ -166,6 +272,8 @@ def test_live_viewer_sessions(tmp_path):
         )()
         s = Session(app, fake, {"run": "1", "compare": "2", "controller": "pd_baseline", "t": "0.5"})
         assert [r.title for r in s.runs] == ["a", "b"] and len(s.sats) == 2
+        drawn = app.server.scene._handle_from_node_name  # viser 1.1.1 (pinned): the scene's nodes by name
+        assert "/B/body/payload" in drawn and "/A/body/payload" not in drawn and "/A/body/voxels" in drawn
         assert s.ctrl_dd.value == "PD baseline" and s.ep_dd.options[0].startswith("1: 90 deg slew")
         assert s.t == pytest.approx(0.5) and "t = 0.50 s" in s.readout.content
         q = s.sats[0].body.wxyz

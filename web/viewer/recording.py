@@ -57,7 +57,7 @@ def recording_bytes(
 
     Args:
         design_json, trajectories_json: the run's artefacts (bytes, str or decoded JSON).
-        spec_json: optional ``spec.json``, for the run's name in the labels.
+        spec_json: optional ``spec.json``, for the run's name in the labels and its payload's cells.
         controllers: which of ``policy`` / ``pd_baseline`` to show, side by side.
         max_episodes: how many recorded slews to play, one after another.
         speed: playback speed (1 = real time of the simulated slew).
@@ -76,7 +76,11 @@ def recording_bytes(
             scene.set_up_direction("+z")
             sats = []
             for c in shown:
-                sats.append(draw_satellite(scene, f"/{c}", run.grid, label=f"{run.title}: {CONTROLLERS[c]}"))
+                sats.append(
+                    draw_satellite(
+                        scene, f"/{c}", run.grid, label=f"{run.title}: {CONTROLLERS[c]}", payload=run.payload_cells
+                    )
+                )
             server.initial_camera.position = lay_out(scene, [f"/{c}" for c in shown], sats)
             server.initial_camera.look_at = (0.0, 0.0, 0.0)
             rec = server.get_scene_serializer()

@@ -108,6 +108,27 @@ class Episode:
         return ", ".join(parts)
 
 
+def payload_cells(spec: dict | None) -> list[tuple[int, int, int]]:
+    """The payload's cells [i, j, k] named by a run's ``spec.json`` as plain JSON: the parts
+    catalog's ``modules.payload.cells``, else (older co-design specs) ``objective.payload_cells``.
+    Empty without a spec or a payload; an entry that is not three integers is skipped (the spec is
+    not validated here: a run whose spec this version refuses is still shown)."""
+    if not isinstance(spec, dict):
+        return []
+    modules, objective = spec.get("modules"), spec.get("objective")
+    payload = modules.get("payload") if isinstance(modules, dict) else None
+    cells = payload.get("cells") if isinstance(payload, dict) else None
+    if not cells and isinstance(objective, dict):
+        cells = objective.get("payload_cells")
+    if not isinstance(cells, list):
+        return []
+    out = []
+    for c in cells:
+        if isinstance(c, (list, tuple)) and len(c) == 3 and all(type(v) is int for v in c):
+            out.append((c[0], c[1], c[2]))
+    return out
+
+
 def sample_period(episodes: list[Episode]) -> float:
     """The shortest median sample period of the episodes, s (0.1 when none has two samples)."""
     dts = [float(np.median(np.diff(e.t_s))) for e in episodes if len(e.t_s) > 1]
@@ -180,6 +201,11 @@ class RunData:
         """``RL`` for the TD3 runs, ``GA`` for the genetic algorithm, ``diffsim`` for the first-order
         learner's."""
         return learner_label(self.algorithm)
+
+    @property
+    def payload_cells(self) -> list[tuple[int, int, int]]:
+        """The payload's cells named by the run's spec (empty when it has none): see :func:`payload_cells`."""
+        return payload_cells(self.spec)
 
     @property
     def controllers(self) -> list[str]:

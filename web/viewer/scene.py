@@ -12,6 +12,9 @@ Layout of one satellite under ``prefix`` (e.g. ``/A``)::
     prefix/body/voxels     one batched mesh: the actuators, orange
     prefix/body/structure  one batched mesh: the structure modules, grey at opacity 0.2
                            (an actuator inside the satellite stays visible)
+    prefix/body/payload    one batched mesh: the payload's cells (the spec's
+                           ``modules.payload.cells`` or ``objective.payload_cells``),
+                           blue-grey at opacity 0.7; absent when the run has no payload
     prefix/body/edges      cube edges (line segments)
     prefix/target          frame, wxyz = q_TN: the target attitude
     prefix/target/ghost    the same voxels at opacity 0.2
@@ -33,8 +36,12 @@ if TYPE_CHECKING:  # viser is imported where a scene is drawn, not here
 #: sRGB colours (0-255). The actuator colour is what the browser tests look for.
 STRUCTURE_SRGB = (150, 150, 150)
 ACTUATOR_SRGB = (255, 127, 14)  # #ff7f0e
+#: The payload's cells: blue-grey, less translucent than structure, so the payload plate reads
+#: as a part of its own while a wheel unit behind it still shows.
+PAYLOAD_SRGB = (96, 125, 168)  # #607da8
 #: Structure modules are drawn translucent so that enclosed actuators show.
 STRUCTURE_OPACITY = 0.2
+PAYLOAD_OPACITY = 0.7
 EDGE_SRGB = (35, 35, 35)
 GHOST_OPACITY = 0.2
 
@@ -76,15 +83,28 @@ class Voxels:
 
     positions: np.ndarray  # (M, 3) float32, cell centres relative to the centre of mass
     types: np.ndarray  # (M,) int: STRUCTURE or ACTUATOR
+    payload: np.ndarray | None = None  # (M,) bool: a payload cell (never an actuator); None: no payload
 
     @classmethod
-    def from_grid(cls, grid) -> Voxels:
+    def from_grid(cls, grid, payload=None) -> Voxels:
+        """The filled cells of ``grid``; ``payload`` lists the payload's cells [i, j, k] (those
+        outside the grid, empty or holding a wheel unit are not marked)."""
         g = np.asarray(grid)
         cells = np.argwhere(g > EMPTY)
         if len(cells) == 0:
             return cls(np.zeros((0, 3), np.float32), np.zeros(0, np.int64))
         com = cells.mean(axis=0)
-        return cls((cells - com).astype(np.float32), g[tuple(cells.T)].astype(np.int64))
+        types = g[tuple(cells.T)].astype(np.int64)
+        marked = None
+        if payload:
+            wanted = {tuple(int(v) for v in c) for c in payload}
+            marked = np.array([tuple(c) in wanted for c in cells.tolist()], dtype=bool) & (types < ACTUATOR)
+        return cls((cells - com).astype(np.float32), types, marked)
+
+    @property
+    def is_payload(self) -> np.ndarray:
+        """(M,) bool: the payload's cells (all False without a payload)."""
+        return np.zeros(len(self.types), bool) if self.payload is None else self.payload
 
     @property
     def colors_linear(self) -> np.ndarray:
@@ -92,7 +112,9 @@ class Voxels:
         table = np.stack(
             [srgb_to_linear(STRUCTURE_SRGB), srgb_to_linear(STRUCTURE_SRGB), srgb_to_linear(ACTUATOR_SRGB)]
         )
-        return table[np.clip(self.types, 0, 2)]
+        out = table[np.clip(self.types, 0, 2)]
+        out[self.is_payload] = srgb_to_linear(PAYLOAD_SRGB)
+        return out
 
     @property
     def radius(self) -> float:
@@ -136,11 +158,13 @@ def draw_satellite(
     label: str | None = None,
     q_BN=(1.0, 0.0, 0.0, 0.0),
     q_TN=(1.0, 0.0, 0.0, 0.0),
+    payload=None,
 ) -> SatelliteHandles:
     """Draw (or redraw, same names) the satellite of ``grid`` (N, N, N) under ``prefix``.
 
-    ``scene`` is a viser ``SceneApi`` (``server.scene`` or ``client.scene``)."""
-    vox = Voxels.from_grid(grid)
+    ``scene`` is a viser ``SceneApi`` (``server.scene`` or ``client.scene``); ``payload`` the
+    payload's cells [i, j, k] (``RunData.payload_cells``), drawn in their own colour."""
+    vox = Voxels.from_grid(grid, payload)
     r = vox.radius
     axes = max(1.5, r + 0.8)
     scene.add_frame(prefix, show_axes=False, position=tuple(float(v) for v in position))
@@ -159,9 +183,15 @@ def draw_satellite(
         ident = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (M, 1))
         colors = vox.colors_linear.astype(np.float32)
         # Actuators opaque, structure translucent: a wheel unit inside the satellite (the
-        # designs that fly best put the one actuator at the centre) stays visible.
-        act = vox.types >= ACTUATOR
-        for name, sel, opacity in (("voxels", act, None), ("structure", ~act, STRUCTURE_OPACITY)):
+        # designs that fly best put the one actuator at the centre) stays visible. The payload
+        # sits between the two, so that its plate stands out from the structure.
+        act, pay = vox.types >= ACTUATOR, vox.is_payload
+        parts = (
+            ("voxels", act, None),
+            ("payload", pay, PAYLOAD_OPACITY),
+            ("structure", ~act & ~pay, STRUCTURE_OPACITY),
+        )
+        for name, sel, opacity in parts:
             if sel.any():
                 scene.add_batched_meshes_simple(
                     f"{prefix}/body/{name}",
@@ -192,6 +222,7 @@ def draw_satellite(
         for name in (
             f"{prefix}/body/voxels",
             f"{prefix}/body/structure",
+            f"{prefix}/body/payload",
             f"{prefix}/body/edges",
             f"{prefix}/target/ghost",
         ):

@@ -197,7 +197,9 @@ class Session:
         with self.client.atomic():
             self.sats = []
             for name, run in zip("AB", self.runs):
-                self.sats.append(draw_satellite(scene, f"/{name}", run.grid, label=run_label(run)))
+                self.sats.append(
+                    draw_satellite(scene, f"/{name}", run.grid, label=run_label(run), payload=run.payload_cells)
+                )
             if len(self.runs) < 2:
                 scene.remove_by_name("/B")
             if not self.runs:
