@@ -89,7 +89,13 @@ def _job_specs(body: Any, settings) -> tuple[JobSpec, list[int], list[str], list
             "content": {
                 "application/json": {
                     "schema": {"$ref": "#/components/schemas/StudySubmission"},
-                    "example": {"spec": {"preset": "quick"}, "seeds": [0, 1, 2], "algorithms": ["td3-codesign", "ga"]},
+                    # quick-td3, as in docs/studies.md: `quick` is a first-order (diffsim) preset
+                    # whose env-step budget, flown by TD3 or the GA, is over the work bound (422).
+                    "example": {
+                        "spec": {"preset": "quick-td3"},
+                        "seeds": [0, 1, 2],
+                        "algorithms": ["td3-codesign", "ga"],
+                    },
                 }
             },
         }
