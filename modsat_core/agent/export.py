@@ -110,6 +110,16 @@ def onnx_bytes(program: torch.export.ExportedProgram) -> bytes:
     return onnx_program.model_proto.SerializeToString()
 
 
+def _onnx_with_metadata(data: bytes, grid: np.ndarray, spec: JobSpec, doc: str) -> bytes:
+    """The ONNX file with its conventions as metadata, or without them (said on stderr) where they cannot
+    be worked out: the controller is worth shipping either way."""
+    try:
+        return with_metadata(data, onnx_metadata(grid, spec), doc)
+    except Exception as exc:
+        _left_out("policy_export.onnx's metadata", exc)
+        return data
+
+
 def onnx_metadata(grid: np.ndarray, spec: JobSpec, job_id: int | None = None) -> dict[str, str]:
     """The ONNX file's ``metadata_props``: control step, torque scale, wheel order and frames, the
     hash of the run's ``spec.json``, the job id (empty where the run does not know it: the worker stamps
@@ -141,7 +151,7 @@ def export_files(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> dict[str,
     doc = "modsat attitude controller: tau_cmd_B = controller(q_BT, omega_B, h_B); see metadata_props"
     writers: dict[str, Callable[[torch.export.ExportedProgram], bytes]] = {
         "policy_export.pt2": program_bytes,
-        "policy_export.onnx": lambda p: with_metadata(onnx_bytes(p), onnx_metadata(grid, spec), doc),
+        "policy_export.onnx": lambda p: _onnx_with_metadata(onnx_bytes(p), grid, spec, doc),
     }
     for name, write in writers.items():
         try:

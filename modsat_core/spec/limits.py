@@ -177,7 +177,8 @@ def estimate(spec: JobSpec) -> Estimate:
             # A trade-off draws at least 4 designs a price, and flies every price's candidates at the end.
             prices = len(spec.objective.trade_off_prices_s_per_kg)
             draws = max(d.design_batch, 4 * prices)
-            flights = max(draws * d.design_slews, 4 * max(1, prices) * e.episodes)
+            finals = 4 * max(1, prices) + (TRADE_OFF_EXTRA_CANDIDATES if prices else 0)
+            flights = max(draws * d.design_slews, finals * e.episodes)
             design = 2 * per_substep * flights
             if d.design_gradient == "relaxed":  # a whole episode's graph, float64
                 relaxed = m.episode_steps * (2 * d.design_slews * per_slew_step + RELAXED_BYTES_PER_STEP)

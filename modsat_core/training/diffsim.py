@@ -116,7 +116,7 @@ class DiffsimRun:
         if len(self.pool) > 1:
             self.row_design = torch.as_tensor(self.rng.integers(0, len(self.pool), size=B), dtype=torch.long)
             # Row 0 starts on the design with the most wheel units: the simulator's unit slots are
-            # sized by its first designs, and every pool design must fit them.
+            # sized by its first designs (and grow when a later one carries more, fly_designs).
             self.row_design[0] = int(np.argmax([d.n_actuators for d in self.pool]))
         self.sim = SlewSim.from_designs(
             [self.pool[i] for i in self.row_design.tolist()],

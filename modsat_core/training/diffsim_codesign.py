@@ -88,6 +88,17 @@ def initial_logits(shape: tuple[int, ...], empty_prior: float | None) -> Tensor:
     return logits.requires_grad_(True)
 
 
+def first_designs(drawn: list[np.ndarray], fixed: np.ndarray, types: np.ndarray) -> list[np.ndarray]:
+    """A design learner's first training designs: its draws that are valid (a wheel unit), else a design
+    with a wheel unit in every free cell. The simulator's wheel-unit slots grow with the designs it flies."""
+    flyable = [g for g in drawn if (g >= ACTUATOR).any()]
+    if flyable:
+        return flyable
+    every = np.full(fixed.shape, ACTUATOR, dtype=np.int64)
+    every[fixed] = types[fixed]
+    return [every]
+
+
 def fixed_cells(
     design_space: DesignSpace, objective: Objective, catalog: ModuleCatalog | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -227,16 +238,9 @@ class DiffsimCodesignRun(DiffsimRun):
 
     # ------------------------------------------------------------------ the distribution
     def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
-        """The mode and a first batch of draws, those that are valid (where none is: a design with a wheel
-        unit in every free cell). The simulator's wheel-unit slots grow with the designs it flies."""
-        N = self.spec.design.grid_size
-        grids, _ = self.draw(self.d.design_batch)
-        flyable = [g for g in [self.mode(), *grids] if (g >= ACTUATOR).any()]  # a wheel unit: valid
-        if not flyable:
-            every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
-            every[self.fixed] = self.fixed_types[self.fixed]
-            flyable = [every]
-        return flyable[0], flyable
+        """The mode and a first batch of draws, those that are valid (:func:`first_designs`)."""
+        pool = first_designs([self.mode(), *self.draw(self.d.design_batch)[0]], self.fixed, self.fixed_types)
+        return pool[0], pool
 
     def probabilities(self) -> np.ndarray:
         return torch.softmax(self.logits.detach(), dim=-1).numpy()

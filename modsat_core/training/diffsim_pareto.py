@@ -42,6 +42,7 @@ from modsat_core.grid import ACTUATOR, EMPTY
 from modsat_core.sim.slew import Design
 from modsat_core.spec.evaluation import Condition
 from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.limits import TRADE_OFF_EXTRA_CANDIDATES
 from modsat_core.spec.parts import design_mass_kg, design_power_W
 from modsat_core.spec.requirements import judged, requirement_verdict
 from modsat_core.training.diffsim import DiffsimRun, training_mission
@@ -51,6 +52,7 @@ from modsat_core.training.diffsim_codesign import (
     best_to_state,
     design_state,
     draw_grids,
+    first_designs,
     fixed_cells,
     grid_log_prob,
     initial_logits,
@@ -64,8 +66,8 @@ MIN_DRAWS = 4
 #: flight condition (those the requirements judge, where there are requirements).
 FLIGHT_READY_SHARE = 0.99
 #: Most points of the run's archive (the non-dominated draws) that join the final candidates, spread
-#: over its range of mass.
-ARCHIVE_CANDIDATES = 16
+#: over its range of mass (admission's estimates count them: modsat_core.spec.limits).
+ARCHIVE_CANDIDATES = TRADE_OFF_EXTRA_CANDIDATES
 
 
 def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[list[dict]]:
@@ -194,16 +196,10 @@ class ParetoRun(DiffsimRun):
         return max(MIN_DRAWS, self.d.design_batch // len(self.prices))
 
     def initial_pool(self) -> tuple[np.ndarray, list[np.ndarray]]:
-        """Every distribution's first draws that are valid (where none is: a design with a wheel unit in
-        every free cell). The simulator's wheel-unit slots grow with the designs it flies."""
-        N = self.spec.design.grid_size
+        """Every distribution's first draws that are valid (:func:`first_designs`)."""
         drawn = [g for l in range(len(self.prices)) for g in self.draw(self.draws_each, l)[0]]
-        flyable = [g for g in drawn if (g >= ACTUATOR).any()]
-        if not flyable:
-            every = np.full((N, N, N), ACTUATOR, dtype=np.int64)
-            every[self.fixed] = self.fixed_types[self.fixed]
-            flyable = [every]
-        return flyable[0], flyable
+        pool = first_designs(drawn, self.fixed, self.fixed_types)
+        return pool[0], pool
 
     # ------------------------------------------------------------------ one design update
     def objective(self, time_s: float, grid: np.ndarray, price: float) -> float:

@@ -76,13 +76,19 @@ def load_spec(args: argparse.Namespace):
 
 
 def _limits():
-    """The per-job limits of the MODSAT_* settings (the service's; docs/service.md, "Limits")."""
+    """The per-job limits of the MODSAT_* settings (the service's; docs/service.md, "Limits"). On the
+    command line the bound on a job's hours applies only where MODSAT_MAX_JOB_HOURS is set: it guards a
+    shared service's queue, and a run on one's own machine may take as long as its owner likes."""
+    import dataclasses
+    import os
+
     from pydantic import ValidationError
 
     from worker.settings import WorkerSettings
 
     try:
-        return WorkerSettings().limits()
+        limits = WorkerSettings().limits()
+        return limits if os.environ.get("MODSAT_MAX_JOB_HOURS") else dataclasses.replace(limits, max_job_hours=None)
     except ValidationError as exc:
         raise SystemExit(
             f"modsat: bad MODSAT_* setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}"

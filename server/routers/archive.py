@@ -81,9 +81,13 @@ def _zip_stream(store, job_id: int, folder: str, files: list[dict[str, Any]]) ->
             info.compress_type = method
             info.external_attr = 0o644 << 16
             with zf.open(info, "w", force_zip64=int(f["size"]) > 0x7FFF0000) as out:
+                sent = 0
                 for chunk in store.iter_artifact(job_id, f["name"], int(f["size"]), f["sha256"]):
                     out.write(chunk)
+                    sent += len(chunk)
                     yield sink.take()
+                if sent != int(f["size"]):  # deleted or replaced while zipping: end the stream broken, never short
+                    raise RuntimeError(f"{f['name']} changed while it was being zipped")
             yield sink.take()
         sums = "".join(f"{f['sha256']}  {f['name']}\n" for f in files)
         zf.writestr(f"{folder}/SHA256SUMS", sums, compress_type=zipfile.ZIP_DEFLATED)

@@ -180,6 +180,7 @@ async function loadOutcomes(items) {
     state.outcomes.set(id, null);
     const r = await api(`/api/jobs/${id}/outcome`);
     if (r.ok) state.outcomes.set(id, r.body);
+    else state.outcomes.delete(id);  // asked again at the next refresh
     const cell = document.querySelector(`#job-${id} td.ret`);
     if (cell) cell.textContent = resultText(j);
   }));

@@ -22,10 +22,6 @@ function niceTicks(lo, hi, count) {
   return ticks;
 }
 
-function fmtTick(v) {
-  return tickLabels([v])[0];
-}
-
 // Labels of one axis's ticks: one unit (k, M) for the axis, and as many decimals as it takes for
 // neighbouring ticks to read differently ("6.65k 6.66k 6.67k", never "6.7k" six times).
 function tickLabels(ticks) {
