@@ -23,6 +23,7 @@ point by more than 2 % in both mass and settling time. One torch thread. The out
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -149,8 +150,15 @@ def beats(points: list[dict], front: list[dict], margin: float = MARGIN) -> int:
     )
 
 
-def bench_pareto(preset: str, seeds: list[int], designs: int = 100, slews: int = 32) -> dict[str, Any]:
-    """The report (module docstring)."""
+def bench_pareto(
+    preset: str,
+    seeds: list[int],
+    designs: int = 100,
+    slews: int = 32,
+    on_seed: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """The report (module docstring); ``on_seed`` gets the report so far after each seed (a long bench
+    keeps what it measured if it is stopped)."""
     out: dict[str, Any] = {"preset": preset, "cpu": _cpu_model(), "slews": slews, "rows": []}
     for seed in seeds:
         data = get_preset(preset).model_dump(mode="json")
@@ -200,4 +208,6 @@ def bench_pareto(preset: str, seeds: list[int], designs: int = 100, slews: int =
                     ),
                 }
             )
+        if on_seed is not None:
+            on_seed(out)
     return out

@@ -148,7 +148,13 @@ def _cmd_bench_pareto(args: argparse.Namespace) -> int:
         if not 1 <= getattr(args, name) <= most:
             raise SystemExit(f"modsat bench pareto: --{name} must be between 1 and {most:,}")
     prepare_report_path(args.out)
-    report = bench_pareto(args.preset, args.seeds, args.designs, args.slews)
+
+    def partial(report: dict) -> None:  # the seeds so far, in --out: a stopped bench keeps them
+        if args.out:
+            with open(args.out, "w") as fh:
+                fh.write(json.dumps(report, indent=2) + "\n")
+
+    report = bench_pareto(args.preset, args.seeds, args.designs, args.slews, on_seed=partial)
     print_report(report, args.out)
     return 0
 
