@@ -85,10 +85,18 @@ class _ProgressBar:
         self.tty = stream.isatty()
         self.last_eval = ""
         self.recent: list[tuple[float, int]] = []  # (time, env steps) of the last minute
+        self.evaluating: float | None = None  # when the final evaluation started
 
     def __call__(self, p: dict) -> None:
         done, total = p["env_steps"], max(p["total_env_steps"], 1)
         now = self.time()
+        if p.get("phase") == "evaluating":  # training is over: what the final evaluation flies, and since when
+            self.evaluating = now if self.evaluating is None else self.evaluating
+            what = f"flying {p['stage']}" if p.get("stage") else "the policy and PD on the evaluation's slews"
+            line = f"final evaluation ({now - self.evaluating:,.0f} s): {what}"
+            self.stream.write(("\r" + line[:160].ljust(160)) if self.tty else line + "\n")
+            self.stream.flush()
+            return
         # The rate of the last minute, not since the start: a resumed run starts at its
         # checkpoint, and the machine's load changes (the ETA once read 105 s, then 2,533 s).
         self.recent.append((now, done))

@@ -237,3 +237,21 @@ def test_progress_eta_follows_the_recent_rate():
         )
     line = bar.stream.getvalue().splitlines()[-1]
     assert "10 steps/s" in line and "eta 9,900 s" in line, line
+
+
+def test_progress_says_what_the_final_evaluation_flies():
+    """After training no steps/s nor ETA (there are no steps left): the evaluation's stage and its time."""
+    import io
+
+    from server.cli import _ProgressBar
+
+    clock = [0.0]
+    bar = _ProgressBar(io.StringIO())
+    bar.time = lambda: clock[0]
+    bar({"env_steps": 100, "total_env_steps": 100, "phase": "training"})
+    for t, stage in ((10.0, None), (40.0, "3/4: the policy on 100 slews under each of 9 flight conditions")):
+        clock[0] = t
+        bar({"env_steps": 100, "total_env_steps": 100, "phase": "evaluating", "stage": stage})
+    lines = bar.stream.getvalue().splitlines()
+    assert lines[-1] == "final evaluation (30 s): flying 3/4: the policy on 100 slews under each of 9 flight conditions"
+    assert "steps/s" not in lines[-1] and "nan" not in bar.stream.getvalue()

@@ -49,6 +49,9 @@ def test_presets_columns_align_for_every_name_length():
         assert len(lines) == len(presets)
         # the algorithm column starts at the same place on every line
         algo = [ln.index(p.algorithm, len(n)) for ln, (n, p) in zip(lines, presets.items(), strict=True)]
-        size = [ln.index("x", a + len(p.algorithm)) - 1 for ln, a, p in zip(lines, algo, presets.values(), strict=True)]
+        size = [  # where the grid column starts ("3x3x3", "10x10x10")
+            ln.index(f"{p.design.grid_size}x{p.design.grid_size}x{p.design.grid_size}", a + len(p.algorithm))
+            for ln, a, p in zip(lines, algo, presets.values(), strict=True)
+        ]
         assert len(set(algo)) == 1 and len(set(size)) == 1, lines
         assert len({ln.index(" env steps") for ln in lines}) == 1, lines  # the numbers end together

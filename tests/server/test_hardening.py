@@ -265,6 +265,8 @@ def test_openapi_declares_the_bearer_token_only_when_one_is_set(api, start_serve
         "cpu-3x3x3",
         "trade-off-3x3x3",
         "trade-off-5x5x5",
+        "trade-off-7x7x7",
+        "trade-off-10x10x10",
     ]
     s = start_server(sqlite_url, env={"MODSAT_API_TOKEN": "s3cret"})
     closed = s.client.get("/api/openapi.json").json()
