@@ -14,7 +14,12 @@ on its own draws. The controller trains on the draws of all of them (under ``ran
 conditions), so that it flies the whole range of masses and wheel sets the front spans. A cheap price
 pulls its distribution to heavy, well-actuated satellites, a dear one to the lightest that still land.
 
-At the end the candidates (each distribution's mode and its best draws) fly the validation slews
+The run keeps an archive of its draws: those that landed every design slew, reduced after each design
+update to the non-dominated set over (mass, median settling); it fills the gaps between the prices' optima
+and costs no flight (the bench gives NSGA-II as many design evaluations).
+
+At the end the candidates (each distribution's mode and its best draws, and up to
+:data:`ARCHIVE_CANDIDATES` archive points spread over its mass range) fly the validation slews
 (``evaluation.episodes``, the mission's physics, float64). The front is their non-dominated set over
 (mass, median settling time) among those that land every slew and are flight-ready (moocore): the
 non-dominated points fly every flight condition of ``evaluation.conditions``; a point that lands less than
