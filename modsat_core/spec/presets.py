@@ -145,20 +145,21 @@ _ALL_WHEELS = [*_CUBESAT_WHEELS, "honeywell-hr12-12"]
 def _trade_off(
     n: int,
     updates: int,
-    requirements: dict,
+    settling_time_s: float,
+    mass_budget_kg: float,
     payload_kg: float,
     episode_steps: int = 360,
     *,
     wheels: list[str] = _CUBESAT_WHEELS,
     prices: tuple[float, ...] = (0.1, 0.3, 1.0, 3.0),
     control_every: int | None = None,
-    big: bool = False,
 ) -> JobSpec:
     """A trade-off preset (docs/requirements.md): a payload plate (the k = 0 layer, ``payload_kg`` a cell),
-    0.2 kg structure modules, wheel units of ``wheels``, `requirements`, the mass ``prices``, trained under
-    the flight conditions. ``big`` (7x7x7 and up): slow satellites, so the mission's physics steps at
-    1/60 s (``control_every`` of them a control step) and training slews last 400 control steps; the design
-    distribution starts sparse (each free cell empty at 90 %)."""
+    0.2 kg structure modules, wheel units of ``wheels``, the requirements (every slew to 90 deg settled to
+    0.25 deg within ``settling_time_s`` on 99 % of the slews, at most ``mass_budget_kg``), the mass
+    ``prices``, trained under the flight conditions. ``control_every`` (7x7x7 and up): slow satellites, so
+    the mission's physics steps at 1/60 s, ``control_every`` of them a control step, training slews last
+    400 control steps and the design distribution starts sparse (each free cell empty at 90 %)."""
     mission: dict = {
         "slew_min_deg": 30.0,
         "slew_max_deg": 90.0,
@@ -166,8 +167,15 @@ def _trade_off(
         "episode_steps": episode_steps,
         "reward": _HOLD_REWARD,
     }
+    requirements = {
+        "slew_max_deg": 90.0,
+        "tolerance_deg": 0.25,
+        "settling_time_s": settling_time_s,
+        "success": 0.99,
+        "mass_budget_kg": mass_budget_kg,
+    }
     extra: dict = {}
-    if big:
+    if control_every is not None:
         mission.update(physics_dt_s=1.0 / 60.0, frame_skip=control_every)
         extra["diffsim"] = {"episode_steps": 400, "design_empty_prior": 0.9}
     return JobSpec.model_validate(
@@ -275,25 +283,15 @@ PRESETS: dict[str, JobSpec] = {
     "trade-off-3x3x3": _trade_off(
         3,
         240,
-        {
-            "slew_max_deg": 90.0,
-            "tolerance_deg": 0.25,
-            "settling_time_s": 20.0,
-            "success": 0.99,
-            "mass_budget_kg": 9.0,
-        },
+        settling_time_s=20.0,
+        mass_budget_kg=9.0,
         payload_kg=0.5,
     ),
     "trade-off-5x5x5": _trade_off(
         5,
         240,
-        {
-            "slew_max_deg": 90.0,
-            "tolerance_deg": 0.25,
-            "settling_time_s": 25.0,
-            "success": 0.99,
-            "mass_budget_kg": 20.0,
-        },
+        settling_time_s=25.0,
+        mass_budget_kg=20.0,
         payload_kg=0.5,
         episode_steps=480,
     ),
@@ -302,35 +300,23 @@ PRESETS: dict[str, JobSpec] = {
     "trade-off-7x7x7": _trade_off(
         7,
         240,
-        {
-            "slew_max_deg": 90.0,
-            "tolerance_deg": 0.25,
-            "settling_time_s": 30.0,
-            "success": 0.99,
-            "mass_budget_kg": 45.0,
-        },
+        settling_time_s=30.0,
+        mass_budget_kg=45.0,
         payload_kg=0.5,
         episode_steps=600,
         wheels=_ALL_WHEELS,
         prices=(0.03, 0.1, 0.3, 1.0),
         control_every=5,
-        big=True,
     ),
     "trade-off-10x10x10": _trade_off(
         10,
         240,
-        {
-            "slew_max_deg": 90.0,
-            "tolerance_deg": 0.25,
-            "settling_time_s": 60.0,
-            "success": 0.99,
-            "mass_budget_kg": 80.0,
-        },
+        settling_time_s=60.0,
+        mass_budget_kg=80.0,
         payload_kg=0.3,
         episode_steps=600,
         wheels=_ALL_WHEELS,
         control_every=10,
-        big=True,
     ),
 }
 
