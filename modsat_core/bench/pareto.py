@@ -155,7 +155,7 @@ def bench_pareto(
     seeds: list[int],
     designs: int = 100,
     slews: int = 32,
-    on_seed: Callable[[dict[str, Any]], None] | None = None,
+    on_seed: Callable[[dict[str, Any]], object] | None = None,
 ) -> dict[str, Any]:
     """The report (module docstring); ``on_seed`` gets the report so far after each seed (a long bench
     keeps what it measured if it is stopped)."""

@@ -9,7 +9,7 @@ import json
 import os
 import sys
 
-from .common import load_spec, log, prepare_report_path, print_report, set_threads
+from .common import load_spec, log, prepare_report_path, print_report, set_threads, write_report
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -149,12 +149,10 @@ def _cmd_bench_pareto(args: argparse.Namespace) -> int:
             raise SystemExit(f"modsat bench pareto: --{name} must be between 1 and {most:,}")
     prepare_report_path(args.out)
 
-    def partial(report: dict) -> None:  # the seeds so far, in --out: a stopped bench keeps them
-        if args.out:
-            with open(args.out, "w") as fh:
-                fh.write(json.dumps(report, indent=2) + "\n")
-
-    report = bench_pareto(args.preset, args.seeds, args.designs, args.slews, on_seed=partial)
+    # the seeds so far go to --out after each one: a stopped bench keeps them
+    report = bench_pareto(
+        args.preset, args.seeds, args.designs, args.slews, on_seed=lambda r: write_report(r, args.out)
+    )
     print_report(report, args.out)
     return 0
 

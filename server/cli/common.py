@@ -23,13 +23,18 @@ def prepare_report_path(path: str | None) -> None:
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
 
 
-def print_report(report: dict | list, path: str | None) -> None:
-    """A benchmark's JSON report on stdout and, if ``path``, in that file."""
+def write_report(report: dict | list, path: str | None) -> str:
+    """A benchmark's JSON report, written to ``path`` if given; returns its text."""
     text = json.dumps(report, indent=2)
     if path:
         with open(path, "w") as fh:
             fh.write(text + "\n")
-    print(text)
+    return text
+
+
+def print_report(report: dict | list, path: str | None) -> None:
+    """A benchmark's JSON report on stdout and, if ``path``, in that file."""
+    print(write_report(report, path))
 
 
 def set_threads(n: int | None) -> None:
