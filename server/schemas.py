@@ -38,6 +38,16 @@ def clip(text: str, limit: int = 100) -> str:
     return repr(text) if len(text) <= limit else f"{text[:limit]!r}... ({len(text)} characters)"
 
 
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+
+
+def safe_file_name(text: str, limit: int = 100) -> str:
+    """``text`` as a file name any file system (and a ``Content-Disposition`` header) takes: each run of
+    other characters than letters, digits, ``.``, ``_`` and ``-`` becomes ``-``, no ``-`` or ``.`` at
+    either end, at most ``limit`` characters; empty if nothing is left."""
+    return _UNSAFE.sub("-", text).strip("-.")[:limit].strip("-.")
+
+
 def _time(t: float | None) -> datetime | None:
     return None if t is None else datetime.fromtimestamp(float(t), tz=timezone.utc)
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import zipfile
 from collections.abc import Iterator
 from typing import Any
@@ -26,7 +25,7 @@ from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 
 from ..deps import StoreDep
-from ..schemas import JobId
+from ..schemas import JobId, safe_file_name
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
@@ -34,7 +33,6 @@ router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 DEFAULT_MAX_ARCHIVE_BYTES = 1 << 30
 #: Files that do not shrink (binary or already compressed) are stored, the rest deflated.
 _STORED = (".pt", ".pt2", ".onnx", ".png", ".viser", ".zip")
-_SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 _ERRORS: dict[int | str, dict[str, Any]] = {404: {"description": "Unknown job, or a job with no output files yet"}}
 
 
@@ -45,7 +43,7 @@ def max_archive_bytes() -> int:
 
 def archive_folder(job_id: int, name: str | None) -> str:
     """``<job-name>-<id>``: the name made safe for any file system (``modsat-job-<id>`` without one)."""
-    stem = _SAFE.sub("-", name or "").strip("-.")[:60] or "modsat-job"
+    stem = safe_file_name(name or "", limit=60) or "modsat-job"
     return f"{stem}-{job_id}"
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import re
 import time
 from typing import Annotated, Any
 
@@ -30,6 +29,7 @@ from ..schemas import (
     job_detail,
     job_summary,
     metrics_point,
+    safe_file_name,
 )
 from ..submit import BadRequest, Invalid, invalid_response, job_from_body, json_content_type
 
@@ -301,9 +301,6 @@ def delete_job(job_id: JobId, store: StoreDep) -> Response:
     return Response(status_code=204)
 
 
-_SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]")
-
-
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactInfo], responses=_ERRORS)
 def list_artifacts(job_id: JobId, store: StoreDep) -> list[ArtifactInfo]:
     """Files of the job: outputs of a finished run (policy, the standalone controller as
@@ -341,7 +338,7 @@ def download_artifact(
         if_none_match.strip() == "*" or etag in {t.strip().removeprefix("W/") for t in if_none_match.split(",")}
     ):
         return Response(status_code=304, headers={"ETag": etag})
-    filename = _SAFE_NAME.sub("_", f"modsat-job-{job_id}-{info['name']}")
+    filename = safe_file_name(f"modsat-job-{job_id}-{info['name']}")
     return StreamingResponse(
         store.iter_artifact(job_id, info["name"], int(info["size"]), info["sha256"]),
         media_type=info["content_type"],

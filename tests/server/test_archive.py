@@ -14,6 +14,7 @@ from fastapi.testclient import TestClient
 
 from modsat_core.spec.presets import get_preset
 from server.app import create_app
+from server.schemas import safe_file_name
 from server.settings import ServerSettings
 from worker.store import JobStore
 
@@ -73,6 +74,17 @@ def test_the_archive_holds_every_output_under_its_plain_name(client, store):
         assert zf.read(f"{folder}/{n}") == data
     sums = dict(line.split("  ")[::-1] for line in zf.read(f"{folder}/SHA256SUMS").decode().splitlines())
     assert sums == {n: hashlib.sha256(d).hexdigest() for n, d in files.items()}
+
+
+def test_one_sanitizer_names_the_archive_and_each_download(client, store):
+    assert safe_file_name("my run/1") == "my-run-1"
+    assert safe_file_name('../a"b\r\nc.zip') == "a-b-c.zip"  # no path, no quote, no header break
+    assert safe_file_name("..//..") == "" and safe_file_name("x" * 300) == "x" * 100
+    job_id = finished_job(store, {"design.json": b"{}"}, name="../..")
+    r = client.get(f"/api/jobs/{job_id}/archive.zip")
+    assert r.headers["content-disposition"] == f'attachment; filename="modsat-job-{job_id}.zip"'
+    r = client.get(f"/api/jobs/{job_id}/artifacts/design.json")
+    assert r.headers["content-disposition"] == f'attachment; filename="modsat-job-{job_id}-design.json"'
 
 
 def test_no_archive_for_a_job_without_outputs_or_over_the_limit(client, store, monkeypatch):
