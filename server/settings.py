@@ -45,6 +45,13 @@ class ServerSettings(WorkerSettings):
     max_active_jobs: int = Field(
         100, ge=1, le=1_000_000, description="Queued plus running jobs; a submission beyond it is 429."
     )
+    max_archive_bytes: int = Field(
+        1 << 30,
+        ge=1,
+        le=1 << 40,
+        description="Largest job archive served (`archive.zip`), bytes of its files before compression; larger "
+        "is 409 (the files stay downloadable one by one).",
+    )
     web_dir: str | None = Field(
         None, description="Directory of the web UI's files (default: web/static/, installed with the package)."
     )

@@ -15,7 +15,6 @@ Routes stay short: the SQL is in worker/store/.
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 from collections.abc import Iterator
 from typing import Any
@@ -24,21 +23,14 @@ from fastapi import APIRouter, HTTPException
 from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 
-from ..deps import StoreDep
+from ..deps import SettingsDep, StoreDep
 from ..schemas import JobId, safe_file_name
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 
-#: Largest archive served, bytes of the files before compression (``MODSAT_MAX_ARCHIVE_BYTES``).
-DEFAULT_MAX_ARCHIVE_BYTES = 1 << 30
 #: Files that do not shrink (binary or already compressed) are stored, the rest deflated.
 _STORED = (".pt", ".pt2", ".onnx", ".png", ".viser", ".zip")
 _ERRORS: dict[int | str, dict[str, Any]] = {404: {"description": "Unknown job, or a job with no output files yet"}}
-
-
-def max_archive_bytes() -> int:
-    raw = os.environ.get("MODSAT_MAX_ARCHIVE_BYTES", "").strip()
-    return int(raw) if raw.isdigit() else DEFAULT_MAX_ARCHIVE_BYTES
 
 
 def archive_folder(job_id: int, name: str | None) -> str:
@@ -100,7 +92,7 @@ def _zip_stream(store, job_id: int, folder: str, files: list[dict[str, Any]]) ->
         409: {"description": "The outputs are larger than MODSAT_MAX_ARCHIVE_BYTES: download them one by one"},
     },
 )
-def download_archive(job_id: JobId, store: StoreDep) -> StreamingResponse:
+def download_archive(job_id: JobId, store: StoreDep, settings: SettingsDep) -> StreamingResponse:
     """Every output file of the job (no checkpoint) in one zip, in a folder `<job-name>-<id>/` with the
     files' plain names and their `SHA256SUMS`. 404 for a job with no output files yet."""
     row = store.get_job(job_id)
@@ -111,7 +103,7 @@ def download_archive(job_id: JobId, store: StoreDep) -> StreamingResponse:
         raise HTTPException(
             404, f"job {job_id} has no output files yet ({row['status']}): the archive comes when the run has succeeded"
         )
-    total, limit = sum(int(f["size"]) for f in files), max_archive_bytes()
+    total, limit = sum(int(f["size"]) for f in files), settings.max_archive_bytes
     if total > limit:
         raise HTTPException(
             409,

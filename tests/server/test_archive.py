@@ -102,7 +102,9 @@ def test_no_archive_for_a_job_without_outputs_or_over_the_limit(client, store, m
         .headers["content-disposition"]
         .endswith(f'filename="modsat-job-{done}.zip"')
     )
-    monkeypatch.setenv("MODSAT_MAX_ARCHIVE_BYTES", "4096")
+    monkeypatch.setenv("MODSAT_MAX_ARCHIVE_BYTES", "4096")  # read once, with the other settings
+    client.app.state.settings = ServerSettings(viewer=False)
+    assert client.app.state.settings.max_archive_bytes == 4096
     r = client.get(f"/api/jobs/{done}/archive.zip")
     assert r.status_code == 409 and "one by one" in r.json()["detail"]
 
