@@ -27,13 +27,19 @@ the score function, whose distribution converges to a valid design, stays the de
 
 The kept design: the distribution's mode and the run's three best draws are flown on the
 validation slews (``evaluation.episodes`` of them, the mission's physics) and the best objective
-wins; the final evaluation flies it with the controller at the end of training, beside PD.
+wins; the final evaluation flies it with the controller at the end of training, beside PD. A run that
+trains for the flight conditions (``randomise``) keeps a flight-ready design: the candidates, best
+objective first, fly the validation slews under each of ``evaluation.conditions`` too, and the first
+that lands :data:`FLIGHT_READY_SHARE` of them under every one is kept (where none does, the one whose
+worst condition is best; the evaluation then flags it). The validation slews are not the final
+evaluation's, so that evaluation still measures a design it was not chosen on.
 """
 
 from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -42,7 +48,7 @@ from torch import Tensor
 
 from modsat_core.agent.diffsim_policy import DiffsimController
 from modsat_core.agent.policy_file import actor_from_state
-from modsat_core.evaluation.monte_carlo import monte_carlo
+from modsat_core.evaluation.monte_carlo import monte_carlo, monte_carlo_conditions
 from modsat_core.grid import ACTUATOR, EMPTY, STRUCTURE, flood_fill
 from modsat_core.sim.mission import draw_episode
 from modsat_core.sim.morphology import mass_properties_of_occupancy
@@ -54,6 +60,9 @@ from modsat_core.training.diffsim import DiffsimRun, _smooth_norm, training_miss
 
 #: Candidates for the kept design besides the distribution's mode: the run's best draws.
 TOP_DRAWS = 3
+#: A design is flight-ready when its controller lands at least this share of the slews under each
+#: flight condition (the trade-off's front asks the same of its points).
+FLIGHT_READY_SHARE = 0.99
 #: Width, in natural-log units, of the relaxed objective's soft tolerance step (within a factor
 #: e**0.5 of the tolerance the step is between 27 % and 73 % of the way).
 RELAXED_SOFTNESS = 0.5
@@ -234,6 +243,7 @@ class DiffsimCodesignRun(DiffsimRun):
         self.design_rng = np.random.default_rng([spec.seed, 5])
         self.records: list[dict] = []  # one per design update
         self.best: list[dict] = []  # the run's best draws, best first: {"grid", "objective_s"}
+        self.on_stage: Callable[[str], None] = lambda _what: None  # what the final choice is flying
         super().__init__(spec, device)
 
     # ------------------------------------------------------------------ the distribution
@@ -371,15 +381,52 @@ class DiffsimCodesignRun(DiffsimRun):
         if not unique:  # a run too short for a design update, its mode without a wheel unit: the curve's design
             unique.append(self.grid)
         ev = self.spec.evaluation
+        self.on_stage(f"the kept design: {len(unique)} candidates on {ev.episodes} validation slews")
         scores = self.score(unique, ev.episodes, ev.seed + 1, exact=True)
-        best = int(np.argmin(scores))
         selection = [
             {"grid": g.tolist(), "objective_s": s, "mode": i == 0 and np.array_equal(g, candidates[0])}
             for i, (g, s) in enumerate(zip(unique, scores, strict=True))
         ]
-        extra: dict[str, Any] = {"designs": self.records, "selection": selection}
         actor = actor_from_state(self.spec, {k: v.cpu() for k, v in self.policy.state_dict().items()})
+        best = self.flight_ready_choice(actor, unique, scores, selection)
+        extra: dict[str, Any] = {"designs": self.records, "selection": selection}
         return actor, unique[best], extra
+
+    def flight_ready_choice(
+        self, actor: torch.nn.Module, grids: list[np.ndarray], scores: list[float], selection: list[dict]
+    ) -> int:
+        """Index of the kept design among ``grids`` (validation ``scores``): the best objective, or, for a
+        run trained for the flight conditions, the best flight-ready one (the module docstring). Each
+        candidate flown under the conditions gets its success per condition in ``selection``."""
+        order = sorted(range(len(grids)), key=lambda i: scores[i])
+        spec, ev = self.spec, self.spec.evaluation
+        if not (spec.randomise.active and ev.conditions):
+            return order[0]
+        from modsat_core.agent.policy import controller_for
+
+        worst: dict[int, float] = {}
+        for n, i in enumerate(order, start=1):
+            self.on_stage(
+                f"the kept design: candidate {n} of {len(order)} under {len(ev.conditions)} flight conditions"
+            )
+            with torch.no_grad():
+                res = monte_carlo_conditions(
+                    Design.from_grid(grids[i], spec.modules),
+                    controller_for(actor, grids[i], spec),
+                    spec.mission,
+                    spec.modules,
+                    ev.conditions,
+                    episodes=ev.episodes,
+                    seed=ev.seed + 1,
+                    dtype=torch.float64,
+                )
+            conds = {c.name: sum(bool(e["success"]) for e in res[c.name].episodes) / ev.episodes for c in ev.conditions}
+            selection[i]["conditions"] = conds
+            worst[i] = min(conds.values())
+            selection[i]["flight_ready"] = worst[i] >= FLIGHT_READY_SHARE
+            if selection[i]["flight_ready"]:
+                return i
+        return max(order, key=lambda i: (worst[i], -scores[i]))
 
     # ------------------------------------------------------------------ checkpoint
     def state_dict(self) -> dict:

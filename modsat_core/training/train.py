@@ -106,7 +106,7 @@ def train(
         )
 
     evaluating(None)
-    if isinstance(run, ParetoRun):  # the front's flights come first, and take the longest
+    if isinstance(run, (ParetoRun, DiffsimCodesignRun)):  # the kept design's (or the front's) flights come first
         run.on_stage = evaluating
     actor, grid, chosen = run.chosen()
     files, summary = run_files(

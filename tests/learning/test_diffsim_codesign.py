@@ -117,6 +117,42 @@ def test_a_run_too_short_for_a_design_update_keeps_the_design_it_flew():
     assert is_valid(grid) and np.array_equal(grid, run.grid) and len(extra["selection"]) == 1
 
 
+def test_a_run_trained_for_the_flight_conditions_keeps_a_flight_ready_design():
+    """With ``randomise`` on, the candidates fly the conditions best objective first and the first that
+    lands every condition is kept (here the first: every slew lands at a 180 deg, 10 rad/s tolerance); where none
+    does, every candidate is flown and the best worst condition wins; a nominal run flies none."""
+    conditions = ["delay-1", "weak-wheels"]
+    spec = tiny_codesign(
+        evaluation__conditions=conditions,
+        mission__tolerance_deg=180.0,
+        mission__rate_tolerance_rad_s=10.0,
+        mission__rate_limit_rad_s=10.0,
+    )
+    spec = spec.model_copy(update={"randomise": spec.randomise.model_copy(update={"delay_steps": 1})})
+    assert spec.randomise.active
+    run = DiffsimCodesignRun(spec)
+    grids = [g for g in run.draw(64)[0] if (g >= ACTUATOR).any()][:3]
+    actor = run.policy.cpu().eval()
+    scores = [3.0, 1.0, 2.0]
+
+    selection: list[dict] = [{} for _ in grids]
+    assert run.flight_ready_choice(actor, grids, scores, selection) == 1
+    assert selection[1]["flight_ready"] and set(selection[1]["conditions"]) == set(conditions)
+    assert "conditions" not in selection[0] and "conditions" not in selection[2]  # no flight after the first
+
+    hard = tiny_codesign(evaluation__conditions=conditions, mission__tolerance_deg=0.001)
+    run.spec = hard.model_copy(update={"randomise": spec.randomise})
+    selection = [{} for _ in grids]
+    kept = run.flight_ready_choice(actor, grids, scores, selection)
+    assert all(not s["flight_ready"] for s in selection)  # every candidate flown, none lands
+    worst = [min(s["conditions"].values()) for s in selection]
+    assert worst[kept] == max(worst) and scores[kept] == min(sc for sc, w in zip(scores, worst) if w == max(worst))
+
+    run.spec = hard  # trained nominally: the best objective, nothing flown
+    selection = [{} for _ in grids]
+    assert run.flight_ready_choice(actor, grids, scores, selection) == 1 and selection == [{}, {}, {}]
+
+
 def test_the_payload_must_fit_the_grid_and_be_one_piece():
     with pytest.raises(SpecError, match="outside"):
         parse_spec({"design": {"grid_size": 2}, "objective": {"payload_cells": [[0, 0, 2]]}})
