@@ -8,11 +8,12 @@ from datetime import datetime, timezone
 from typing import Annotated, Any, Literal
 
 from fastapi import Path
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
 from modsat_core.artefacts import CurvePoint, ProgressRecord, RunSummary
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.presets import PRESETS
+from modsat_core.spec.sections import Mission
 from modsat_core.spec.study import ALGORITHMS, DEFAULT_ALGORITHMS, MAX_SEEDS
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
@@ -133,6 +134,11 @@ class JobDetail(JobSummary):
     """Everything about one job."""
 
     spec: dict[str, Any]
+    control_dt_s: float | None = Field(
+        None,
+        description="The spec's control step, s (`Mission.control_dt_s`: the physics step times the frame skip); "
+        "null for a spec this version cannot read.",
+    )
     latest_metrics: MetricsPoint | None
     evaluation: RunSummary | None = Field(description="Summary of the final Monte-Carlo evaluation.")
     error_detail: str | None = Field(description="Traceback of the last failed attempt.")
@@ -241,12 +247,21 @@ def metrics_point(row: dict[str, Any]) -> MetricsPoint:
     return MetricsPoint(seq=row["seq"], attempt=row["attempt"], time=_time(row["created_at"]), **data)
 
 
+def _control_dt_s(spec: Any) -> float | None:
+    try:
+        return Mission.model_validate(spec.get("mission", {})).control_dt_s
+    except (AttributeError, ValidationError):
+        return None
+
+
 def job_detail(row: dict[str, Any], latest: dict[str, Any] | None, attempts: list[dict[str, Any]]) -> JobDetail:
     base = job_summary(row).model_dump()
     jid = row["id"]
+    spec = json.loads(row["spec"])
     return JobDetail(
         **base,
-        spec=json.loads(row["spec"]),
+        spec=spec,
+        control_dt_s=_control_dt_s(spec),
         latest_metrics=metrics_point(latest) if latest else None,
         evaluation=_json(row["summary"]),
         error_detail=row["error_detail"],

@@ -124,13 +124,12 @@ def onnx_metadata(grid: np.ndarray, spec: JobSpec, job_id: int | None = None) ->
     """The ONNX file's ``metadata_props``: control step, torque scale, wheel order and frames, the
     hash of the run's ``spec.json``, the job id (empty where the run does not know it: the worker stamps
     it), modsat's version, the input and output layout and the design (docs/export.md)."""
-    m = spec.mission
     torque_max = spec.modules.torque_scale_Nm * Design.from_grid(grid, spec.modules).slot_weights()[0]
     return conventions(
         version=modsat_core.__version__,
         spec_json=spec.model_dump_json(indent=2),  # the bytes of the run's spec.json
         algorithm=spec.algorithm,
-        control_dt_s=m.physics_dt_s * m.frame_skip,
+        control_dt_s=spec.mission.control_dt_s,
         torque_scale_Nm=spec.modules.torque_scale_Nm,
         unit_torque_max_Nm=[float(t) for t in torque_max],
         grid=np.asarray(grid).tolist(),

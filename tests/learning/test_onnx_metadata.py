@@ -41,7 +41,7 @@ def test_a_runs_onnx_file_says_how_to_fly_it(tmp_path):
     meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
     assert set(KEYS) <= set(meta)
     assert {p.key: p.value for p in onnx.load(str(path)).metadata_props} == meta  # onnx reads the same
-    assert float(meta["modsat.control_dt_s"]) == spec.mission.physics_dt_s * spec.mission.frame_skip
+    assert float(meta["modsat.control_dt_s"]) == spec.mission.control_dt_s
     assert float(meta["modsat.torque_scale_Nm"]) == spec.modules.torque_scale_Nm == 0.05
     assert json.loads(meta["modsat.unit_torque_max_Nm"]) == [0.05, 0.05, 0.05]
     assert meta["modsat.wheel_units"] == "3"

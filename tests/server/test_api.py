@@ -21,6 +21,7 @@ def test_submit_preset_returns_201_with_location(api):
     assert job["status"] == "queued" and job["name"] == "quick-td3"
     assert job["spec"]["training"]["total_env_steps"] == 400
     assert job["spec"]["training"]["hidden_sizes"] == [256, 256], "the rest comes from the preset"
+    assert job["control_dt_s"] == get_preset("quick-td3").mission.control_dt_s  # the page's one control step
     assert job["progress"] == {
         "env_steps": 0,
         "total_env_steps": 400,

@@ -31,7 +31,13 @@ def jobs(tmp_path_factory):
     j = Jobs(s)
     ids = {}
     # a co-design job: curve.json with design updates and the kept design's candidates
-    ids["codesign"] = jid = j.submit("codesign", algorithm="diffsim-codesign", objective=OBJECTIVE)
+    ids["codesign"] = jid = j.submit(
+        "codesign",
+        algorithm="diffsim-codesign",
+        objective=OBJECTIVE,
+        # 120 control steps of 10 x 1/240 s: a 5 s episode, from the server's control step (JobDetail.control_dt_s)
+        mission={"tolerance_deg": 1.0, "frame_skip": 10, "episode_steps": 120},
+    )
     c = j.claim(jid)
     j.complete(c, CROSS)
     curve = CurveFile(
@@ -110,6 +116,7 @@ def test_a_codesign_job_shows_its_objective_result_times_and_archive(jobs, new_p
     page.wait_for_selector("#codesign:not([hidden]) table.codesign-table")
     objective = page.text_content("#objective-text")
     assert "0.05 s per module" in objective and "0.5 s more per wheel unit" in objective, objective
+    assert "the whole episode, 5.0 s" in objective, objective
     assert "Payload: 2 cells" in page.text_content("#codesign")
     kept = page.locator("#codesign tr.kept")
     assert kept.count() == 1 and "9.60" in kept.text_content()  # the kept design is design.json's (CROSS)

@@ -741,10 +741,10 @@ function objectiveParts(grid, obj) {
 
 // curve.json of diffsim-codesign: the objective and its prices, the payload, the kept design against the
 // run's other candidates and the random designs of the untrained distribution, the objective over training.
-function codesignView(curve, spec, keptGrid) {
+function codesignView(curve, spec, controlDtS, keptGrid) {
   const obj = spec.objective || {}, mission = spec.mission || {};
-  const episodeS = mission.episode_steps && mission.physics_dt_s && mission.frame_skip
-    ? mission.episode_steps * mission.physics_dt_s * mission.frame_skip : null;
+  // the control step as the server computes it (JobDetail.control_dt_s, Mission.control_dt_s)
+  const episodeS = mission.episode_steps && controlDtS ? mission.episode_steps * controlDtS : null;
   const terms = ["the mean settling time over the slews (a slew that does not land, or breaks the rate limit, counts "
     + (episodeS ? `the whole episode, ${episodeS.toFixed(1)} s)` : "the whole episode)")];
   if (obj.module_price_s) terms.push(`${obj.module_price_s} s per module`);
@@ -898,7 +898,7 @@ async function renderFiles(job, files) {
       toBox.hidden = false;
     } else if (r.ok && r.body && Array.isArray(r.body.designs) && r.body.designs.some((d) => d.mean_objective_s != null)) {
       const spec = job.spec || {};
-      cdBox.replaceChildren(...codesignView(r.body, spec, state.designs.get(String(job.id))));
+      cdBox.replaceChildren(...codesignView(r.body, spec, job.control_dt_s, state.designs.get(String(job.id))));
       cdBox.hidden = false;
     }
   }
