@@ -127,9 +127,8 @@ def final_evaluation(
     ``on_stage(i, n, what)`` is told before each of its ``n`` stages (the policy and PD on the
     nominal slews, then under the flight conditions) starts: ``modsat eval`` prints it."""
     ev = spec.evaluation
-    conditions = ev.conditions
-    n_stages = 2 + 2 * bool(conditions)
-    stage = on_stage or (lambda _i, _n, _what: None)
+    # the policy and PD on the nominal slews, then (with conditions) under the flight conditions
+    stage = _Stages(on_stage, 2 + 2 * bool(ev.conditions))
     n = episodes or ev.episodes
     tols = tuple(sorted({*REPORT_TOLERANCES_DEG, spec.mission.tolerance_deg}))
     out: dict[str, Any] = {"episodes": n, "seed": ev.seed, "design_valid": bool(is_valid(grid))}
@@ -144,9 +143,9 @@ def final_evaluation(
         return out
     design = Design.from_grid(grid, spec.modules)
     kw: dict[str, Any] = dict(episodes=n, seed=ev.seed, record=min(ev.trajectories, n), dtype=torch.float64)
-    stage(1, n_stages, f"the policy on {n} nominal slews")
+    stage(f"the policy on {n} nominal slews")
     mc = monte_carlo(design, controller_for(actor, grid, spec), spec.mission, spec.modules, **kw)
-    stage(2, n_stages, f"PD on the same {n} slews")
+    stage(f"PD on the same {n} slews")
     pd = monte_carlo(design, PDController, spec.mission, spec.modules, **kw)
     out["policy"] = {"summary": mc.summary(tols), "episodes": mc.episodes}
     out["pd_baseline"] = {"summary": pd.summary(tols), "episodes": pd.episodes}
@@ -166,6 +165,18 @@ def final_evaluation(
     return out
 
 
+class _Stages:
+    """``on_stage(i, n, what)`` of :func:`final_evaluation` told each stage's number as it starts."""
+
+    def __init__(self, on_stage: Callable[[int, int, str], None] | None, total: int):
+        self.on_stage, self.total, self.started = on_stage, total, 0
+
+    def __call__(self, what: str) -> None:
+        self.started += 1
+        if self.on_stage is not None:
+            self.on_stage(self.started, self.total, what)
+
+
 def condition_table(
     actor: torch.nn.Module,
     grid: np.ndarray,
@@ -173,21 +184,22 @@ def condition_table(
     spec: JobSpec,
     tols: tuple[float, ...],
     episodes: int,
-    on_stage: Callable[[int, int, str], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> tuple[list[dict], dict[str, list[dict]]]:
     """The policy and PD under each of ``evaluation.conditions``, on the evaluation's slews (float64,
     the mission's physics): one row per condition with each controller's summary at ``tols``, and the
-    policy's slews under each condition by name (the requirements' verdict reads them)."""
+    policy's slews under each condition by name (the requirements' verdict reads them).
+    ``on_stage(what)`` is told before each of its two stages starts (the caller numbers them)."""
     conditions = spec.evaluation.conditions
     if not conditions:
         return [], {}
     kw: dict[str, Any] = dict(episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
     m, mods = spec.mission, spec.modules
-    stage = on_stage or (lambda _i, _n, _what: None)
+    stage = on_stage or (lambda _what: None)
     names = ", ".join(c.name for c in conditions)
-    stage(3, 4, f"the policy on {episodes} slews under each of {len(conditions)} flight conditions ({names})")
+    stage(f"the policy on {episodes} slews under each of {len(conditions)} flight conditions ({names})")
     pol = monte_carlo_conditions(design, controller_for(actor, grid, spec), m, mods, conditions, **kw)
-    stage(4, 4, f"PD on the same slews under each of {len(conditions)} flight conditions")
+    stage(f"PD on the same slews under each of {len(conditions)} flight conditions")
     pd = monte_carlo_conditions(design, PDController, m, mods, conditions, **kw)
     rows = [
         {

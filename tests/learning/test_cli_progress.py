@@ -13,6 +13,7 @@ import torch
 from modsat_core.agent.networks import make_actor
 from modsat_core.agent.policy_file import policy_bytes
 from modsat_core.codesign.features import N_FEATURES
+from modsat_core.evaluation.run_files import final_evaluation
 from modsat_core.spec.presets import PRESETS
 from server.cli.run import presets_table
 
@@ -40,6 +41,21 @@ def test_modsat_eval_prints_a_line_per_stage_before_its_table(tmp_path):
     assert [ln.split("]")[0][-3:] for ln in lines] == ["1/4", "2/4", "3/4", "4/4"]
     assert "delay-1, tumble" in lines[2]
     assert "done in" in r.stderr and "policy" in r.stdout
+
+
+def test_the_evaluation_numbers_its_stages_out_of_those_it_runs():
+    """The stage numbers are counted, not written down: without flight conditions 2 of 2, with them 4 of 4."""
+    grid = np.ones((3, 3, 3), dtype=np.int64)
+    grid[1, 1, 1] = 2
+    torch.manual_seed(0)
+    actor = make_actor("per-module", N_FEATURES, [16, 16], False).eval()
+    for conditions, total in (([], 2), (["delay-1"], 4)):
+        spec = tiny_spec(
+            design={"grid_size": 3}, evaluation={"episodes": 1, "trajectories": 0, "conditions": conditions}
+        )
+        told: list[tuple[int, int]] = []
+        final_evaluation(actor, grid, spec, on_stage=lambda i, n, _what, told=told: told.append((i, n)))
+        assert told == [(i, total) for i in range(1, total + 1)]
 
 
 def test_presets_columns_align_for_every_name_length():
