@@ -9,12 +9,15 @@ store as a worker writes them (test_job_list.Jobs)."""
 from __future__ import annotations
 
 import hashlib
+import json
+import time
 
 import pytest
-from sqlalchemy import update
+from sqlalchemy import insert, update
 
 from modsat_core.artefacts import CurveFile, ProgressRecord
-from worker.store.schema import artifacts
+from worker.store.schema import artifacts, metrics
+from worker.store.schema import jobs as job_rows
 
 from .conftest import DESKTOP, PHONE, Serve, screenshot_dir
 from .test_job_list import CROSS, CUBE, TOTAL, Jobs, _curve
@@ -137,6 +140,46 @@ def test_a_codesign_job_shows_its_objective_result_times_and_archive(jobs, new_p
             assert len(labels) == len(set(labels)), labels
     name = "desktop" if viewport is DESKTOP else "phone"
     page.screenshot(path=str(screenshot_dir() / f"codesign-{name}.png"), full_page=True)
+
+
+def test_a_long_runs_evaluation_is_found_past_the_first_page_of_records(jobs, new_page):
+    """A finished job of 5,100 training records, then the final evaluation's: the page reads every page of
+    records (it read the first 5,000 only), keeping running aggregates, and splits the wall time at the
+    evaluation's start."""
+    serve, j, _ids = jobs
+    jid = j.submit("long")
+    c = j.claim(jid)
+    n = 5100
+    with j.store._write() as conn:  # as publish_progress writes them, in one transaction
+        conn.execute(
+            insert(metrics),
+            [
+                {
+                    "job_id": jid,
+                    "seq": k,
+                    "attempt": c.attempt,
+                    "created_at": time.time(),
+                    "env_steps": k,
+                    "data": json.dumps(
+                        ProgressRecord(env_steps=k, total_env_steps=n, phase="training", elapsed_s=0.1 * k).to_dict()
+                    ),
+                }
+                for k in range(1, n + 1)
+            ],
+        )
+        conn.execute(update(job_rows).where(job_rows.c.id == jid).values(last_seq=n, env_steps=n))
+    j.store.publish_progress(
+        c,
+        ProgressRecord(
+            env_steps=n, total_env_steps=n, phase="evaluating", stage="2/4: PD on the same 100 slews", elapsed_s=510.0
+        ).to_dict(),
+    )
+    j.complete(c, CROSS)
+    page = new_page(DESKTOP)
+    page.goto(f"{serve.base}/#job={jid}")
+    page.wait_for_function("document.getElementById('d-times').textContent.includes('wall time')")
+    times = page.text_content("#d-times")
+    assert "training 8 min 30 s" in times and "final evaluation" in times, times
 
 
 def test_tick_labels_differ_where_the_range_is_narrow(jobs, new_page):

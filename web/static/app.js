@@ -20,7 +20,7 @@ const state = {
   view: null, compare: "",
   designs: new Map(), // job id -> design.json's grid (null: none), kept: a finished job's design never changes
   outcomes: new Map(), // job id -> GET /api/jobs/{id}/outcome of a finished job (null: asked for), kept too
-  records: [], // the selected job's progress records (env_steps, elapsed_s, phase, time): ETA and timings
+  progress: newProgress(), // what the ETA and the timings need of the selected job's progress records
 };
 
 // ------------------------------------------------------------------ helpers
@@ -477,9 +477,27 @@ function attemptSeconds(job, now) {
   });
 }
 
+// What the job page keeps of a job's progress records, updated as each one arrives instead of keeping
+// them all (a long run has tens of thousands): the final evaluation's first record (its start, the
+// training's elapsed_s) and latest one with a stage, and the latest attempt's first and latest
+// training records with elapsed_s (the training speed).
+function newProgress() {
+  return { evaluating: null, staged: null, attemptFirst: null, training: null };
+}
+
+function noteRecord(p, r) {
+  if (r.phase === "evaluating") {
+    if (!p.evaluating) p.evaluating = r;
+    if (r.stage) p.staged = r;
+  } else if (r.elapsed_s != null) {
+    if (!p.attemptFirst || p.attemptFirst.attempt !== r.attempt) p.attemptFirst = r;
+    p.training = r;
+  }
+}
+
 // The first progress record of the final evaluation (phase "evaluating"), if there is one.
 function evaluationRecord() {
-  return state.records.find((r) => r.phase === "evaluating") || null;
+  return state.progress.evaluating;
 }
 
 // The job's wall time: queued -> finished, and how it splits (waiting, training, final evaluation).
@@ -504,12 +522,9 @@ function timesText(job) {
 
 // Training speed from the latest attempt's progress records: env steps per second of elapsed_s.
 function stepsPerSecond() {
-  const recs = state.records.filter((r) => r.elapsed_s != null && r.phase !== "evaluating");
-  if (!recs.length) return null;
-  const last = recs[recs.length - 1];
-  const same = recs.filter((r) => r.attempt === last.attempt);
-  const first = same[0];
-  if (same.length > 1 && last.elapsed_s > first.elapsed_s && last.env_steps > first.env_steps) {
+  const last = state.progress.training, first = state.progress.attemptFirst;
+  if (!last) return null;
+  if (first !== last && last.elapsed_s > first.elapsed_s && last.env_steps > first.env_steps) {
     return (last.env_steps - first.env_steps) / (last.elapsed_s - first.elapsed_s);
   }
   return last.attempt === 1 && last.elapsed_s > 0 && last.env_steps > 0 ? last.env_steps / last.elapsed_s : null;
@@ -533,7 +548,7 @@ function renderProgress(p, m) {
     const ev = evaluationRecord();
     const since = ev && ev.time ? (Date.now() - Date.parse(ev.time)) / 1000 : null;
     // the latest record says what it flies now (a trade-off's front first, then the kept design's stages)
-    const now = state.records.filter((r) => r.phase === "evaluating" && r.stage).pop();
+    const now = state.progress.staged;
     $("d-progress").textContent = "Final evaluation: " + (now ? `flying ${now.stage}`
       : "flying the policy and the PD baseline on the evaluation's slews, nominal and under each flight condition")
       + (since != null ? ` \u00b7 ${fmt.dur(since)} so far` : "")
@@ -955,7 +970,7 @@ async function selectJob(id, view) {
   state.selected = id;
   if (changed) {
     state.evalPoints = [];
-    state.records = [];
+    state.progress = newProgress();
     state.curveFromFile = null;
     state.reference = null;
     if (view === undefined) state.view = null;
@@ -973,15 +988,34 @@ async function selectJob(id, view) {
     return;
   }
   const job = jr.body;
-  state.records = mr.ok ? mr.body.items : [];
+  const read = await readProgress(id, mr);
+  if (String(state.selected) !== id) return;
+  state.progress = read.progress;
+  state.evalPoints = read.evalPoints;
   renderHead(job);
-  state.evalPoints = mr.ok ? mr.body.items.filter((m) => m.eval).map((m) => m.eval) : [];
   const has3d = await renderFiles(job, fr.ok ? fr.body : []);
   await loadCompareOptions();
   showView(has3d && (state.view === "live" ? !$("view-live").disabled : state.view === "recording" ? !$("view-rec").disabled : false)
     ? state.view : null);
   writeHash();
-  if (!TERMINAL.has(job.status)) followJob(job, mr.ok ? mr.body.last_seq : 0);
+  if (!TERMINAL.has(job.status)) followJob(job, read.lastSeq);
+}
+
+// Every progress record of job `id`, a page at a time from the first `page`, folded into the running
+// aggregates (noteRecord) and the curve's points; nothing else of a page is kept.
+async function readProgress(id, page) {
+  const progress = newProgress(), evalPoints = [];
+  let r = page, lastSeq = 0;
+  while (r.ok) {
+    for (const m of r.body.items) {
+      noteRecord(progress, m);
+      if (m.eval) evalPoints.push(m.eval);
+    }
+    lastSeq = r.body.last_seq;
+    if (!r.body.more || String(state.selected) !== id) break;
+    r = await api(`/api/jobs/${id}/metrics?after=${lastSeq}&limit=5000`);
+  }
+  return { progress, evalPoints, lastSeq };
 }
 
 function followJob(job, after) {
@@ -989,7 +1023,7 @@ function followJob(job, after) {
   state.detailStream = openEvents(id, after, {
     metrics: (m) => {
       if (String(state.selected) !== id) return;
-      state.records.push(m);
+      noteRecord(state.progress, m);
       const total = m.total_env_steps || job.progress.total_env_steps;
       renderProgress({ ...job.progress, env_steps: m.env_steps, total_env_steps: total, phase: m.phase,
         fraction: total ? Math.min(1, m.env_steps / total) : 0 }, m);
