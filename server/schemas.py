@@ -184,12 +184,26 @@ class CancelResult(BaseModel):
     job: JobDetail
 
 
+class RunTimeInfo(BaseModel):
+    """One measured time per run of a preset (modsat_core.spec.preset_times)."""
+
+    time: str = Field(description='A figure or a range with its unit, e.g. "68-75 s" or "207-242 s training".')
+    cpu: str = Field(description='The CPU it was measured on, e.g. "AMD EPYC".')
+
+
 class PresetInfo(BaseModel):
     name: str
     algorithm: str
     grid_size: int
     total_env_steps: int
     url: str
+    time_per_run: list[RunTimeInfo] = Field(
+        default_factory=list,
+        description="How long a run took, as measured, one entry per CPU kind (the README's table); empty: "
+        "not measured here.",
+    )
+    time_text: str = Field(description='`time_per_run` as one line, e.g. "68-75 s (AMD EPYC)", or "not measured here".')
+    time_measured: str = Field(description="How the times were measured (threads, runs at a time, cores).")
 
 
 class Health(BaseModel):

@@ -9,10 +9,11 @@ from fastapi import APIRouter, HTTPException
 
 import modsat_core
 from modsat_core.spec.jobspec import JobSpec
+from modsat_core.spec.preset_times import HOW_MEASURED, run_time_text, run_times
 from modsat_core.spec.presets import PRESETS
 
 from ..deps import StoreDep
-from ..schemas import Health, PresetInfo, clip
+from ..schemas import Health, PresetInfo, RunTimeInfo, clip
 
 
 def service_router() -> APIRouter:
@@ -21,7 +22,8 @@ def service_router() -> APIRouter:
 
     @r.get("/presets", response_model=list[PresetInfo], tags=["specs"])
     def list_presets() -> list[PresetInfo]:
-        """The named specs. Submit one with `{"preset": NAME}`."""
+        """The named specs, each with its measured time per run (CPU named). Submit one with
+        `{"preset": NAME}`."""
         return [
             PresetInfo(
                 name=n,
@@ -29,6 +31,9 @@ def service_router() -> APIRouter:
                 grid_size=s.design.grid_size,
                 total_env_steps=s.training.total_env_steps,
                 url=f"/api/presets/{n}",
+                time_per_run=[RunTimeInfo(time=t.time, cpu=t.cpu) for t in run_times(n)],
+                time_text=run_time_text(n),
+                time_measured=HOW_MEASURED,
             )
             for n, s in PRESETS.items()
         ]

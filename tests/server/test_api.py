@@ -8,6 +8,7 @@ import json
 import httpx
 import pytest
 
+from modsat_core.spec.preset_times import run_time_text
 from modsat_core.spec.presets import PRESETS, get_preset
 
 TINY = {"preset": "quick-td3", "overrides": {"training": {"total_env_steps": 400}}}
@@ -180,6 +181,9 @@ def test_metrics_and_events_of_a_job_without_progress(api):
 def test_presets_schema_health_and_page(api):
     presets = api.client.get("/api/presets").json()
     assert [p["name"] for p in presets] == list(PRESETS)
+    times = {p["name"]: p for p in presets}  # the form's estimates: the README's, CPU named
+    assert times["quick"]["time_text"] == run_time_text("quick") and times["quick"]["time_per_run"][0]["cpu"]
+    assert times["paper-3x3x3"]["time_per_run"] == [] and times["paper-3x3x3"]["time_text"] == "not measured here"
     quick = api.client.get("/api/presets/quick").json()
     assert quick == get_preset("quick").model_dump(mode="json")
     r = api.client.get("/api/presets/nope")

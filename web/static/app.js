@@ -14,6 +14,7 @@ const FIELD_PATHS = ["name", "algorithm", "seed", "training.total_env_steps", "t
 const state = {
   offset: 0, status: "", total: 0,
   schema: null, presetSpec: null,
+  presets: new Map(), // preset name -> GET /api/presets's entry (its measured time per run)
   viewer: null,
   listStreams: new Map(), // job id -> EventSource
   selected: null, job: null, detailStream: null, evalPoints: [], curveFromFile: null, reference: null,
@@ -359,14 +360,23 @@ async function choosePreset(name) {
   $("overrides").value = JSON.stringify(r.body, null, 2);
   const info = $("preset").selectedOptions[0];
   $("preset-info").textContent = info ? info.title : "";
+  $("preset-time").textContent = presetTimeText(state.presets.get(name));
   buildFields();
   clearSubmitMessages();
+}
+
+// The preset's measured time per run, CPU named (modsat_core/spec/preset_times.py, the README's table).
+function presetTimeText(p) {
+  if (!p) return "";
+  if (!p.time_per_run || !p.time_per_run.length) return `Time per run: ${p.time_text}.`;
+  return `Time per run, as measured: ${p.time_text}; ${p.time_measured}. Other CPUs, or more jobs at once, differ.`;
 }
 
 async function loadPresets() {
   const [p, s] = await Promise.all([api("/api/presets"), api("/api/schema")]);
   if (!p.ok || !s.ok) { showSubmitErrors(["cannot load the presets: " + errorText(p.ok ? s : p)]); return; }
   state.schema = s.body;
+  state.presets = new Map(p.body.map((x) => [x.name, x]));
   const sel = $("preset");
   sel.replaceChildren(...p.body.map((x) => el("option", { value: x.name,
     title: `${x.algorithm}, ${x.grid_size}x${x.grid_size}x${x.grid_size} grid, ${fmt.int(x.total_env_steps)} env steps`,
