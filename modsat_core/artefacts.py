@@ -352,6 +352,15 @@ class CurveFile(Record):
         ),
     )
     generations: list[dict[str, Any]] | None = Field(None, description="GA: the survivor schedule.")
+    initial_design: dict[str, Any] | None = Field(
+        None,
+        description=(
+            "diffsim-codesign without a trade-off: the paper's initial design (the full cube, its centre a "
+            "wheel unit, the payload as structure) flown by the controller at the end of training on the "
+            "candidates' validation slews: `grid`, `objective_s`. Absent for a trade-off (its front is the "
+            "comparison) and where a payload covers the cube's centre (no wheel unit)."
+        ),
+    )
 
 
 class RunSummary(Record):

@@ -24,11 +24,10 @@ import torch
 from modsat_core.agent.policy_file import load_policy
 from modsat_core.bench.learners import _cpu_model, timed_train
 from modsat_core.grid import ACTUATOR, EMPTY
-from modsat_core.sim.gym_envs import reference_design
 from modsat_core.sim.pd import PDController
 from modsat_core.spec.jobspec import DesignSpace, JobSpec, Objective, parse_spec
 from modsat_core.spec.presets import get_preset
-from modsat_core.training.diffsim_codesign import fixed_cells, satellites, score_designs
+from modsat_core.training.diffsim_codesign import fixed_cells, initial_design, satellites, score_designs
 
 
 def random_designs(design_space: DesignSpace, objective: Objective, n: int, seed: int) -> list[np.ndarray]:
@@ -42,12 +41,6 @@ def random_designs(design_space: DesignSpace, objective: Objective, n: int, seed
         if (g >= ACTUATOR).any():
             out.append(g)
     return out
-
-
-def initial_design(design_space: DesignSpace, objective: Objective) -> np.ndarray:
-    """The full cube with its centre actuator; the payload cells structure."""
-    fixed, types = fixed_cells(design_space, objective)
-    return np.where(fixed, types, reference_design(design_space.grid_size)).astype(np.int64)
 
 
 def design_counts(grid: np.ndarray) -> dict[str, int]:
@@ -118,7 +111,7 @@ def bench_codesign(
     policy, kept, spec = load_policy(files["policy.pt"])
     assert kept is not None
     ev = json.loads(files["evaluation.json"])
-    cube = initial_design(spec.design, spec.objective)
+    cube = initial_design(spec.design, spec.objective, spec.modules)
     rand = random_designs(spec.design, spec.objective, designs, seed)
     grids = [kept, cube, *rand]
     cmp_seed = spec.evaluation.seed + 2

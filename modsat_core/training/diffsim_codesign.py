@@ -32,7 +32,10 @@ trains for the flight conditions (``randomise``) keeps a flight-ready design: th
 objective first, fly the validation slews under each of ``evaluation.conditions`` too, and the first
 that lands :data:`FLIGHT_READY_SHARE` of them under every one is kept (where none does, the one whose
 worst condition is best; the evaluation then flags it). The validation slews are not the final
-evaluation's, so that evaluation still measures a design it was not chosen on.
+evaluation's, so that evaluation still measures a design it was not chosen on. The paper's initial
+design (:func:`initial_design`, the full cube) flies in the candidates' batch, on the same slews by
+the same controller, never a candidate: the comparison the kept design is read against (curve.json's
+``initial_design``).
 """
 
 from __future__ import annotations
@@ -126,6 +129,17 @@ def fixed_cells(
         c = (N // 2,) * 3
         mask[c], types[c] = True, ACTUATOR
     return mask, types
+
+
+def initial_design(design_space: DesignSpace, objective: Objective, catalog: ModuleCatalog | None = None) -> np.ndarray:
+    """The paper's initial design, (N, N, N) int64: the full cube of structure modules whose centre
+    module is a wheel unit (a parts catalog's first), the fixed cells as :func:`fixed_cells` gives them
+    (the payload as structure). Without a wheel unit where a payload covers the centre."""
+    N = design_space.grid_size
+    cube = np.full((N, N, N), STRUCTURE, dtype=np.int64)
+    cube[(N // 2,) * 3] = ACTUATOR
+    fixed, types = fixed_cells(design_space, objective, catalog)
+    return np.where(fixed, types, cube).astype(np.int64)
 
 
 def satellites(raw: np.ndarray, fixed: np.ndarray, types: np.ndarray) -> np.ndarray:
@@ -372,7 +386,8 @@ class DiffsimCodesignRun(DiffsimRun):
     # ------------------------------------------------------------------ the end
     def chosen(self) -> tuple[torch.nn.Module, np.ndarray, dict]:
         """The controller at the end of training and the kept design: the mode or one of the run's
-        best draws, whichever scores best on the validation slews."""
+        best draws, whichever scores best on the validation slews. The initial design flies in the
+        same batch (never a candidate): its objective is the record's ``initial_design``."""
         candidates = [self.mode(), *[b["grid"] for b in self.best]]
         unique: list[np.ndarray] = []
         for g in candidates:
@@ -382,7 +397,11 @@ class DiffsimCodesignRun(DiffsimRun):
             unique.append(self.grid)
         ev = self.spec.evaluation
         self.on_stage(f"the kept design: {len(unique)} candidates on {ev.episodes} validation slews")
-        scores = self.score(unique, ev.episodes, ev.seed + 1, exact=True)
+        cube = initial_design(self.spec.design, self.spec.objective, self.spec.modules)
+        flyable = bool((cube >= ACTUATOR).any())
+        same = [i for i, g in enumerate(unique) if np.array_equal(g, cube)]
+        scores = self.score([*unique, *([cube] if flyable and not same else [])], ev.episodes, ev.seed + 1, exact=True)
+        scores, cube_score = scores[: len(unique)], scores[same[0] if same else -1]
         selection = [
             {"grid": g.tolist(), "objective_s": s, "mode": i == 0 and np.array_equal(g, candidates[0])}
             for i, (g, s) in enumerate(zip(unique, scores, strict=True))
@@ -390,6 +409,8 @@ class DiffsimCodesignRun(DiffsimRun):
         actor = actor_from_state(self.spec, {k: v.cpu() for k, v in self.policy.state_dict().items()})
         best = self.flight_ready_choice(actor, unique, scores, selection)
         extra: dict[str, Any] = {"designs": self.records, "selection": selection}
+        if flyable:
+            extra["initial_design"] = {"grid": cube.tolist(), "objective_s": cube_score}
         return actor, unique[best], extra
 
     def flight_ready_choice(

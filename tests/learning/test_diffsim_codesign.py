@@ -18,7 +18,7 @@ from modsat_core.sim.pd import PDController
 from modsat_core.sim.slew import SlewSim
 from modsat_core.spec.jobspec import JobSpec, SpecError, parse_spec
 from modsat_core.training.checkpoint import checkpoint_from_bytes, checkpoint_to_bytes
-from modsat_core.training.diffsim_codesign import DiffsimCodesignRun, objective_s, satellites
+from modsat_core.training.diffsim_codesign import DiffsimCodesignRun, objective_s, satellites, score_designs
 from modsat_core.training.train import train
 
 PAYLOAD = [[0, 0, 0], [0, 0, 1]]
@@ -97,6 +97,14 @@ def test_a_run_learns_a_design_writes_every_output_and_resumes_the_same():
     policy, grid, _ = load_policy(files["policy.pt"])
     assert isinstance(policy, DiffsimPolicy) and policy.n_design == N_DESIGN_INPUTS
     assert grid.tolist() == kept
+    # the paper's initial design, the full cube (centre wheel unit, payload structure), flown by the
+    # trained controller on the candidates' validation slews: the same figure flown on its own
+    cube = np.full((2, 2, 2), STRUCTURE)
+    cube[1, 1, 1] = ACTUATOR
+    ev = spec.evaluation
+    alone = score_designs(spec, policy.double(), [cube], ev.episodes, ev.seed + 1, exact=True)[0]
+    assert curve["initial_design"]["grid"] == cube.tolist()
+    assert curve["initial_design"]["objective_s"] == pytest.approx(alone, rel=1e-9)
     assert {"policy_export.pt", "evaluation.json"} <= set(files)
     ckpts: list[dict] = []
     stops = iter([False, False, False, True])
@@ -115,6 +123,15 @@ def test_a_run_too_short_for_a_design_update_keeps_the_design_it_flew():
     assert not run.best and not (run.mode() >= 2).any()
     _, grid, extra = run.chosen()
     assert is_valid(grid) and np.array_equal(grid, run.grid) and len(extra["selection"]) == 1
+    assert extra["initial_design"]["grid"][1][1][1] == ACTUATOR
+
+
+def test_no_initial_design_where_the_payload_covers_the_cubes_centre():
+    """The cube's one wheel unit sits at the centre: a payload there leaves it no wheel, no comparison."""
+    run = DiffsimCodesignRun(tiny_codesign(objective__payload_cells=[[1, 1, 1], [1, 1, 0]]))
+    run.update()
+    _, _, extra = run.chosen()
+    assert "initial_design" not in extra and extra["selection"]
 
 
 def test_a_run_trained_for_the_flight_conditions_keeps_a_flight_ready_design():

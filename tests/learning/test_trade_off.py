@@ -89,6 +89,7 @@ def test_a_trade_off_run_returns_its_front_keeps_the_lightest_that_meets_and_res
     assert [s[:4] for s in stages[-4:]] == ["1/4:", "2/4:", "3/4:", "4/4:"]
     curve = json.loads(files["curve.json"])
     front, selection = curve["front"], curve["selection"]
+    assert "initial_design" not in curve  # the front is a trade-off's comparison, not the one cube
     assert front and len(curve["designs"]) == 3 and len(curve["designs"][0]["prices"]) == 2
     # the front is the non-dominated set, over (mass, median settling), of the candidates that land every
     # slew and are flight-ready (where none is: of those that land, each point saying it is not)

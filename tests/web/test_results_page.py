@@ -24,6 +24,8 @@ from .test_job_list import CROSS, CUBE, TOTAL, Jobs, _curve
 
 pytestmark = pytest.mark.browser
 
+# the paper's initial design: 27 modules, its centre the one wheel unit
+FULL_CUBE = [[[1, 1, 1], [1, 1, 1], [1, 1, 1]], [[1, 1, 1], [1, 2, 1], [1, 1, 1]], [[1, 1, 1], [1, 1, 1], [1, 1, 1]]]
 OBJECTIVE = {"module_price_s": 0.05, "wheel_price_s": 0.5, "payload_cells": [[0, 0, 0], [0, 1, 0]]}
 
 
@@ -59,6 +61,7 @@ def jobs(tmp_path_factory):
             {"grid": CUBE, "objective_s": 10.75, "mode": True},
             {"grid": CROSS, "objective_s": 9.6, "mode": False},
         ],
+        initial_design={"grid": FULL_CUBE, "objective_s": 23.45},
     )
     with j.store._write() as conn:  # the run's curve.json, as diffsim-codesign writes it
         data = curve.to_json()
@@ -124,6 +127,10 @@ def test_a_codesign_job_shows_its_objective_result_times_and_archive(jobs, new_p
     kept = page.locator("#codesign tr.kept")
     assert kept.count() == 1 and "9.60" in kept.text_content()  # the kept design is design.json's (CROSS)
     assert page.locator("#codesign tr.random").count() == 2 and "14.00" in page.text_content("#codesign")
+    initial = page.locator("#codesign tr.initial")  # curve.json's initial_design: objective, its prices, its parts
+    assert initial.count() == 1
+    cells = [c.text_content() for c in initial.locator("td").all()]
+    assert "full cube" in initial.text_content() and cells == ["23.45", "21.60", "1.85", "27 / 1"], cells
     assert page.locator("#codesign svg.chart").count() == 1
     assert page.get_attribute("#archive-link", "href") == f"/api/jobs/{jid}/archive.zip"
     times = page.text_content("#d-times")

@@ -765,7 +765,9 @@ function objectiveParts(grid, obj) {
 }
 
 // curve.json of diffsim-codesign: the objective and its prices, the payload, the kept design against the
-// run's other candidates and the random designs of the untrained distribution, the objective over training.
+// run's other candidates, the paper's initial design (the full cube, flown by the trained controller; absent
+// from older runs and where a payload covers the cube's centre) and the random designs of the untrained
+// distribution, the objective over training.
 function codesignView(curve, spec, controlDtS, keptGrid) {
   const obj = spec.objective || {}, mission = spec.mission || {};
   // the control step as the server computes it (JobDetail.control_dt_s, Mission.control_dt_s)
@@ -794,6 +796,10 @@ function codesignView(curve, spec, controlDtS, keptGrid) {
   const rows = [];
   if (kept) rows.push(row("kept design", kept.objective_s, kept.grid, "kept"));
   sel.filter((c) => c !== kept).forEach((c) => rows.push(row(c.mode ? "the distribution's mode" : "one of the best draws", c.objective_s, c.grid)));
+  const cube = curve.initial_design;
+  if (cube && cube.objective_s != null) {
+    rows.push(row("initial design: the full cube, flown by the same controller", cube.objective_s, cube.grid, "initial"));
+  }
   const d = curve.designs.filter((x) => x.mean_objective_s != null);
   if (d.length) {
     const f = d[0];
@@ -812,8 +818,8 @@ function codesignView(curve, spec, controlDtS, keptGrid) {
   return [el("h3", { text: "Co-design: the objective" }),
     el("p", { id: "objective-text", text: "Objective, in seconds (lower is better): " + terms.join(" + ") + "." }),
     el("p", { class: "hint", text: payloadText }),
-    el("p", { class: "hint", text: "Candidates scored on the validation slews (the mission's physics); the random "
-      + "designs' figures are the first design update's draws, on the training slews." }),
+    el("p", { class: "hint", text: "Candidates and the initial design scored on the validation slews (the mission's "
+      + "physics); the random designs' figures are the first design update's draws, on the training slews." }),
     el("div", { class: "table-wrap" }, table), el("div", { class: "curves" }, chart)];
 }
 
