@@ -32,8 +32,10 @@ from dataclasses import dataclass
 
 from modsat_core.spec.jobspec import JobSpec, Training, is_diffsim
 
-#: Per-cell features (``features.N_FEATURES``; a test checks they agree).
+#: Per-cell features (``features.N_FEATURES``; a test checks they agree), and those the last command
+#: adds with `training.observe_last_command` (``features.N_LAST_COMMAND``).
 N_FEATURES = 53
+N_LAST_COMMAND = 6
 #: Per-cell encoder width of the set network (``networks.SET_CELL_WIDTH``; a test checks it).
 SET_CELL_WIDTH = 32
 #: Layer outputs kept per cell and wide layer in one TD3 update (forward and backward of the
@@ -80,11 +82,16 @@ REPLAY_ROW: tuple[tuple[str, tuple[int | str, ...], str], ...] = (
     ("reward", (), "float32"),
     ("terminal", (), "bool"),
 )
+#: With `training.observe_last_command`: the observed state's last command (the action commanded one
+#: control step before it, per cell). The next state's is the row's action (zero where the observed
+#: state was designing: its flight starts with no command), so it is not stored twice.
+REPLAY_LAST_COMMAND: tuple[str, tuple[int | str, ...], str] = ("obs_last_cmd", ("C", 3), "float16")
 _ITEM_BYTES = {"uint8": 1, "bool": 1, "int16": 2, "float16": 2, "float32": 4}
 
 
-def replay_layout(N: int) -> dict[str, tuple[tuple[int, ...], str]]:
-    """The fields of one replay transition on an N^3 grid: name -> (shape, dtype name)."""
+def replay_layout(N: int, last_command: bool = False) -> dict[str, tuple[tuple[int, ...], str]]:
+    """The fields of one replay transition on an N^3 grid: name -> (shape, dtype name); with
+    ``last_command`` (`training.observe_last_command`) the observed state's last command too."""
     C = N**3
 
     def shape(dims: tuple[int | str, ...]) -> tuple[int, ...]:
@@ -92,12 +99,15 @@ def replay_layout(N: int) -> dict[str, tuple[tuple[int, ...], str]]:
 
     fields = {f"{side}_{k}": (shape(dims), dt) for side in ("obs", "next") for k, dims, dt in REPLAY_STATE}
     fields.update({k: (shape(dims), dt) for k, dims, dt in REPLAY_ROW})
+    if last_command:
+        name, dims, dt = REPLAY_LAST_COMMAND
+        fields[name] = (shape(dims), dt)
     return fields
 
 
-def transition_bytes(N: int) -> int:
+def transition_bytes(N: int, last_command: bool = False) -> int:
     """Bytes of one replay transition on an N^3 grid (:func:`replay_layout`)."""
-    return sum(math.prod(shape) * _ITEM_BYTES[dt] for shape, dt in replay_layout(N).values())
+    return sum(math.prod(shape) * _ITEM_BYTES[dt] for shape, dt in replay_layout(N, last_command).values())
 
 
 def replay_capacity(training: Training) -> int:
@@ -144,7 +154,7 @@ def estimate(spec: JobSpec) -> Estimate:
     t, m, e = spec.training, spec.mission, spec.evaluation
     N = spec.design.grid_size
     C = N**3
-    F = N_FEATURES
+    F = N_FEATURES + (N_LAST_COMMAND if t.observe_last_command else 0)
     H = sum(t.hidden_sizes)
     per_cell_width = H if t.network == "per-module" else SET_CELL_WIDTH
     update = 4 * t.batch_size * (C * (2 * F + _UPDATE_PASSES * per_cell_width) + _UPDATE_PASSES * H)
@@ -193,7 +203,7 @@ def estimate(spec: JobSpec) -> Estimate:
             evaluation_steps=evaluation_steps,
         )
     return Estimate(
-        replay_bytes=replay_capacity(t) * transition_bytes(N),
+        replay_bytes=replay_capacity(t) * transition_bytes(N, t.observe_last_command),
         update_bytes=update,
         step_bytes=step,
         evaluation_bytes=evaluation,
@@ -257,7 +267,8 @@ def _mlp_flops(widths: list[int]) -> int:
 def td3_sample_flops(spec: JobSpec) -> int:
     """One forward pass of the TD3 actor (the critics are of the same size) for one satellite."""
     t = spec.training
-    C, F, h = spec.design.grid_size**3, N_FEATURES, list(t.hidden_sizes)
+    C, h = spec.design.grid_size**3, list(t.hidden_sizes)
+    F = N_FEATURES + (N_LAST_COMMAND if t.observe_last_command else 0)
     if t.network == "per-module":  # the trunk on every cell, two heads
         return C * (_mlp_flops([F + 3, *h, 3]) + 2 * h[-1] * 3)
     W = SET_CELL_WIDTH  # a per-cell encoder, the wide layers once, per-cell heads
@@ -346,7 +357,10 @@ def work(spec: JobSpec) -> Work:
     replay = (
         0
         if is_diffsim(spec)
-        else min(CHECKPOINT_BUFFER_BYTES, replay_capacity(t) * transition_bytes(spec.design.grid_size))
+        else min(
+            CHECKPOINT_BUFFER_BYTES,
+            replay_capacity(t) * transition_bytes(spec.design.grid_size, t.observe_last_command),
+        )
     )
     checkpoint = n_ckpt * (CHECKPOINT_S + replay / CHECKPOINT_BYTES_PER_S)
     return Work(

@@ -141,6 +141,31 @@ class Training(_Section):
             "unchanged. false = the paper's actor."
         ),
     )
+    observe_last_command: bool = Field(
+        False,
+        description=(
+            "The actor and the critics also observe the last command: the action commanded at the previous "
+            "control step (each wheel unit's own, and the mean over the units; zero at a flight's first step). "
+            "With one control step of actuation delay the torque acting now is that command, so only with it "
+            "is the plant Markov again. Whatever flies the policy feeds it its own previous command (the "
+            "evaluation, the flight conditions, `modsat verify`); the exported controller takes it as a "
+            "fourth input, `tau_last_B` (docs/export.md). On in the TD3 presets; false = the paper's "
+            "observation (and every spec written before it)."
+        ),
+    )
+    randomise_after_success: float | None = Field(
+        None,
+        gt=0.0,
+        le=1.0,
+        description=(
+            "A curriculum for `randomise`: training flights are nominal until an evaluation on the learning "
+            "curve (`eval_episodes` nominal slews, the deterministic policy) lands at least this share of its "
+            "slews; every flight that starts after it draws its flight conditions from `randomise`, to the "
+            "end of the run. Read from the curve, so a resumed run keeps the switch. Once it has happened, the "
+            "final evaluation chooses among the snapshots evaluated after it (docs/robustness.md). No effect "
+            "without `randomise`. null = randomised from the first flight."
+        ),
+    )
     policy_noise: float = Field(0.2, ge=0.0, le=2.0, description="Target policy smoothing std.")
     noise_clip: float = Field(0.5, ge=0.0, le=2.0, description="Clip of the target smoothing noise.")
     action_l2: float = Field(

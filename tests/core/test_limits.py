@@ -22,12 +22,14 @@ def _spec(**sections):
 
 def test_constants_agree_with_the_code():
     from modsat_core.agent.networks import SET_CELL_WIDTH
-    from modsat_core.codesign.features import N_FEATURES
+    from modsat_core.codesign.features import N_FEATURES, N_LAST_COMMAND
     from modsat_core.training.replay_layout import replay_buffer_bytes
 
     assert limits.N_FEATURES == N_FEATURES and limits.SET_CELL_WIDTH == SET_CELL_WIDTH
+    assert limits.N_LAST_COMMAND == N_LAST_COMMAND
     for n in (2, 3, 5, 10):  # the buffer is built from the same table: this checks the dtypes' sizes
-        assert limits.transition_bytes(n) * 1000 == replay_buffer_bytes(n, 1000)
+        for last in (False, True):
+            assert limits.transition_bytes(n, last) * 1000 == replay_buffer_bytes(n, 1000, last)
 
 
 def test_validating_limits_imports_no_torch():
@@ -45,7 +47,9 @@ def test_presets_fit_the_defaults(name):
 
 
 def test_replay_estimate_is_the_issue_figure():
-    big = _spec(design={"grid_size": 10}, training={"buffer_size": 500_000, "total_env_steps": 1_000_000})
+    # The issue's layout: no last command (quick-td3 observes it since: 2.8 GiB more here)
+    training = {"buffer_size": 500_000, "total_env_steps": 1_000_000, "observe_last_command": False}
+    big = _spec(design={"grid_size": 10}, training=training)
     est = limits.estimate(big)
     assert est.replay_bytes / 2**30 == pytest.approx(9.36, abs=0.01)  # "9.4 GiB" in the issue
     no_work_bound = limits.Limits(max_job_hours=None)  # a million updates on a 10^3 grid: over the work bound too

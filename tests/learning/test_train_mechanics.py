@@ -129,8 +129,9 @@ def test_ga_run_stops_and_resumes():
 
 def test_replay_buffer_of_5x5x5_for_5e5_transitions_is_under_2_GB():
     n = replay_buffer_bytes(5, 500_000)
-    print(f"5x5x5 replay buffer, 5e5 transitions: {n / 2**30:.2f} GiB")
-    assert n < 2 * 2**30
+    with_last = replay_buffer_bytes(5, 500_000, last_command=True)  # `training.observe_last_command`
+    print(f"5x5x5 replay buffer, 5e5 transitions: {n / 2**30:.2f} GiB ({with_last / 2**30:.2f} with the last command)")
+    assert n < with_last < 2 * 2**30
     small = ReplayBuffer(replay_fields(5), 100)  # the formula is what the buffer allocates
     assert small.nbytes == replay_buffer_bytes(5, 100)
     assert all(
