@@ -53,20 +53,23 @@ class CellActor(nn.Module):
 
     ``odd_control``: the control head's output is made odd under :func:`mirror_control`
     (`training.odd_control`): half the difference of its values on the features and on the
-    mirrored features, before the tanh."""
+    mirrored features, before the tanh. ``n_last``: how many of the ``n_features`` are the last
+    command's (:data:`~modsat_core.codesign.features.N_LAST_COMMAND` with
+    `training.observe_last_command`, else 0), the last ones."""
 
-    def __init__(self, n_features: int, hidden: list[int], odd_control: bool = False):
+    def __init__(self, n_features: int, hidden: list[int], odd_control: bool = False, n_last: int = 0):
         super().__init__()
         self.trunk = nn.Sequential(mlp([n_features, *hidden]), nn.ReLU())
         self.design_head = nn.Linear(hidden[-1], 3)
         self.control_head = nn.Linear(hidden[-1], 3)
         self.odd_control = odd_control
+        self.n_last = n_last
 
     def act(self, x: Tensor, act_mask: Tensor, value_mask: Tensor, design: Tensor) -> Tensor:
         z = self.trunk(x)
         control = self.control_head(z)
         if self.odd_control and not bool(design.all()):  # design rows keep their design head's output
-            control = 0.5 * (control - self.control_head(self.trunk(mirror_control(x))))
+            control = 0.5 * (control - self.control_head(self.trunk(mirror_control(x, tail=self.n_last))))
         raw = torch.where(design.reshape(-1, 1, 1), self.design_head(z), control)
         return torch.tanh(raw) * act_mask.unsqueeze(-1).to(raw.dtype)
 
@@ -77,7 +80,7 @@ class CellActor(nn.Module):
         xc = x[:, cells]
         control = self.control_head(self.trunk(xc))
         if self.odd_control:
-            control = 0.5 * (control - self.control_head(self.trunk(mirror_control(xc))))
+            control = 0.5 * (control - self.control_head(self.trunk(mirror_control(xc, tail=self.n_last))))
         return torch.tanh(control)
 
     @torch.jit.unused  # the export compiles ``act``; CellObs is no TorchScript type
@@ -136,12 +139,13 @@ class _SetActorPhase(nn.Module):
     """One phase's actor: per-cell encoder, pooling, wide layers, per-cell head on acting cells.
     ``odd``: the head's output is made odd under :func:`mirror_control`, as :class:`CellActor`'s."""
 
-    def __init__(self, n_features: int, hidden: list[int], cell_width: int, odd: bool = False):
+    def __init__(self, n_features: int, hidden: list[int], cell_width: int, odd: bool = False, n_last: int = 0):
         super().__init__()
         self.encoder = nn.Sequential(nn.Linear(n_features, cell_width), nn.ReLU(inplace=True))
         self.wide = nn.Sequential(mlp([cell_width + n_features, *hidden]), nn.ReLU())
         self.head = _CellHead(cell_width, hidden[-1])
         self.odd = odd
+        self.n_last = n_last
 
     def _encode(self, x: Tensor, value_mask: Tensor) -> tuple[Tensor, Tensor]:
         """Every cell's encoding (B, C, cell_width) and its satellite's ``head.sat`` output (B, cell_width)."""
@@ -161,7 +165,7 @@ class _SetActorPhase(nn.Module):
         enc, sat = self._encode(x, value_mask)
         out = self.head(enc[:, cells], sat.unsqueeze(1))
         if self.odd:
-            enc_m, sat_m = self._encode(mirror_control(x), value_mask)
+            enc_m, sat_m = self._encode(mirror_control(x, tail=self.n_last), value_mask)
             out = 0.5 * (out - self.head(enc_m[:, cells], sat_m.unsqueeze(1)))
         return torch.tanh(out)
 
@@ -170,7 +174,7 @@ class _SetActorPhase(nn.Module):
         rows, cells = idx[:, 0], idx[:, 1]
         out = self._out(x, value_mask, rows, cells)
         if self.odd:
-            out = 0.5 * (out - self._out(mirror_control(x), value_mask, rows, cells))
+            out = 0.5 * (out - self._out(mirror_control(x, tail=self.n_last), value_mask, rows, cells))
         raw = torch.zeros(x.shape[0], x.shape[1], 3, dtype=x.dtype, device=x.device)
         raw[rows, cells] = torch.tanh(out)
         return raw
@@ -186,10 +190,18 @@ class SetActor(nn.Module):
     while designing, the actuators while flying).
     """
 
-    def __init__(self, n_features: int, hidden: list[int], odd_control: bool = False, cell_width: int = SET_CELL_WIDTH):
+    def __init__(
+        self,
+        n_features: int,
+        hidden: list[int],
+        odd_control: bool = False,
+        n_last: int = 0,
+        cell_width: int = SET_CELL_WIDTH,
+    ):
         super().__init__()
+        self.n_last = n_last  # the last command's features, the last n_last (see CellActor)
         self.design = _SetActorPhase(n_features, hidden, cell_width)
-        self.control = _SetActorPhase(n_features, hidden, cell_width, odd=odd_control)
+        self.control = _SetActorPhase(n_features, hidden, cell_width, odd=odd_control, n_last=n_last)
         # The untrained design head grows structure everywhere (the full cube around the seed
         # actuator), not whatever type its random initialisation favours. Measured: from an
         # empty grid, runs whose first designs were all empty never left them (a one-module
@@ -290,11 +302,20 @@ def _check(network: str) -> None:
         raise ValueError(f"unknown network {network!r}; known: {', '.join(NETWORKS)}")
 
 
-def make_actor(network: str, n_features: int, hidden: list[int], odd_control: bool = False) -> nn.Module:
+def make_actor(
+    network: str, n_features: int, hidden: list[int], odd_control: bool = False, n_last: int = 0
+) -> nn.Module:
     """The co-design actor of ``network`` (``per-module`` or ``set``); ``odd_control``: the
-    control output is odd under :func:`mirror_control` (`training.odd_control`)."""
+    control output is odd under :func:`mirror_control` (`training.odd_control`); ``n_last``: the
+    last ``n_last`` of the ``n_features`` are the last command's (`training.observe_last_command`)."""
     _check(network)
-    return _ACTORS[network](n_features, list(hidden), odd_control)
+    return _ACTORS[network](n_features, list(hidden), odd_control, n_last)
+
+
+def observes_last_command(actor: nn.Module) -> bool:
+    """Whether a co-design actor's features end with the last command's (`training.observe_last_command`):
+    whatever flies it must give it the command it returned at the previous control step."""
+    return int(getattr(actor, "n_last", 0)) > 0
 
 
 def make_critic(network: str, n_features: int, hidden: list[int]) -> nn.Module:

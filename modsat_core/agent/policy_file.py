@@ -19,11 +19,12 @@ from modsat_core.agent.diffsim_policy import (
     DiffsimPolicy,
 )
 from modsat_core.agent.networks import make_actor
-from modsat_core.codesign.features import N_FEATURES
+from modsat_core.codesign.features import N_FEATURES, N_LAST_COMMAND
 from modsat_core.sim.pd import RATE_GAIN_MAX_NO_DELAY_MARGIN
-from modsat_core.spec.jobspec import JobSpec, is_diffsim
+from modsat_core.spec.jobspec import JobSpec, Training, is_diffsim
 
-#: Version 2: the network is named in the file (``per-module`` or ``set``), 53 features.
+#: Version 2: the network is named in the file (``per-module`` or ``set``), 53 features (59 with
+#: `training.observe_last_command`, which the file's spec says).
 POLICY_VERSION = 2
 
 
@@ -45,21 +46,32 @@ def _n_design(spec: JobSpec) -> int:
     return N_DESIGN_INPUTS if conditioned else 0
 
 
+def n_last_of(training: Training) -> int:
+    """The last command's features a TD3 spec's networks see (`training.observe_last_command`), else 0."""
+    return N_LAST_COMMAND if training.observe_last_command else 0
+
+
+def n_features_of(training: Training) -> int:
+    """The per-cell features a TD3 spec's actor and critics see."""
+    return N_FEATURES + n_last_of(training)
+
+
 def network_of(spec: JobSpec) -> tuple[str, list[int], int]:
     """The network a spec's policy is: its name in ``policy.pt``, its widths and its inputs."""
     if is_diffsim(spec):
         name = DIFFSIM_PD_NETWORK if spec.diffsim.base == "pd" else DIFFSIM_NETWORK
         return name, list(spec.diffsim.hidden_sizes), N_DIFFSIM_INPUTS + _n_design(spec)
-    return spec.training.network, list(spec.training.hidden_sizes), N_FEATURES
+    return spec.training.network, list(spec.training.hidden_sizes), n_features_of(spec.training)
 
 
 def new_actor(spec: JobSpec) -> torch.nn.Module:
     """The policy network of a spec: the first-order learner's controller (``diffsim.hidden_sizes``)
-    or the co-design actor (``training.network``, ``hidden_sizes``, ``odd_control``)."""
+    or the co-design actor (``training.network``, ``hidden_sizes``, ``odd_control``,
+    ``observe_last_command``)."""
     if is_diffsim(spec):
         return DiffsimPolicy(list(spec.diffsim.hidden_sizes), _n_design(spec))
     t = spec.training
-    return make_actor(t.network, N_FEATURES, list(t.hidden_sizes), t.odd_control)
+    return make_actor(t.network, n_features_of(t), list(t.hidden_sizes), t.odd_control, n_last_of(t))
 
 
 def actor_from_state(spec: JobSpec, state: dict) -> torch.nn.Module:
@@ -99,7 +111,7 @@ def load_policy(data: bytes) -> tuple[torch.nn.Module, np.ndarray | None, JobSpe
     d = load_plain(data, "policy file")
     if not isinstance(d, dict) or d.get("format") != "modsat-policy":
         raise ValueError("not a modsat policy file")
-    inputs = (N_FEATURES, N_DIFFSIM_INPUTS, N_DIFFSIM_INPUTS + N_DESIGN_INPUTS)
+    inputs = (N_FEATURES, N_FEATURES + N_LAST_COMMAND, N_DIFFSIM_INPUTS, N_DIFFSIM_INPUTS + N_DESIGN_INPUTS)
     if d.get("version") != POLICY_VERSION or d.get("n_features") not in inputs:
         raise ValueError(
             f"policy file version {d.get('version')} ({d.get('n_features')} features) is from an "

@@ -24,6 +24,13 @@ controller cannot know what share of the total torque is its own; and a validity
 without which no cell of a per-module critic can tell that the grid as a whole has no
 actuator or is in pieces (validity is global; a cell's neighbourhood cannot show it).
 Empty cells get all-zero control features.
+
+With `training.observe_last_command` (TD3 under actuation delay) a flying row's cells carry six
+more features, appended after these 53 (:data:`N_LAST_COMMAND`): the cell's own last command (the
+action commanded at the previous control step, in [-1, 1]; zero on cells that are not wheel
+units) and the mean last command of the satellite's wheel units (on every module). With one
+control step of delay the torque acting now is that command, so only with it is the plant Markov
+again (docs/learning.md, "TD3 under delay"). Zero at a flight's first step and on design rows.
 """
 
 from __future__ import annotations
@@ -47,6 +54,9 @@ RATE_GAIN = 50.0
 N_CONTROL_GLOBAL = N_CONTROL - 3
 #: Where a cell's control part (the satellite's `control_globals`, then the wheel) starts.
 CONTROL_AT = N_COMMON + N_DESIGN
+#: Features of the last command (`training.observe_last_command`), after the N_FEATURES: the cell's
+#: own (3) and the mean over the satellite's wheel units (3).
+N_LAST_COMMAND = 6
 
 
 def control_globals(
@@ -80,11 +90,12 @@ def control_globals(
     )
 
 
-def mirror_control(x: Tensor, at: int = CONTROL_AT, n: int = N_CONTROL_GLOBAL) -> Tensor:
+def mirror_control(x: Tensor, at: int = CONTROL_AT, n: int = N_CONTROL_GLOBAL, tail: int = 0) -> Tensor:
     """``x`` (..., F) with the :func:`control_globals` numbers at ``at:at + n`` (a cell's, by
     default) mirrored: the features of the same satellite with the error vector q_v and the
     body rate negated (the inverse error, turning the other way; `training.odd_control`).
-    Everything else is kept.
+    The last ``tail`` numbers (the last command's, :data:`N_LAST_COMMAND`, where observed) are
+    negated: the mirrored satellite was commanded the opposite torque. Everything else is kept.
 
     q_v, omega and their tanh channels flip; q_w and dq_w/dt (-q_v . omega / 2) do not;
     dq_v/dt = (q_w omega + q_v x omega) / 2 becomes -dq_v/dt + q_v x omega. The map is its own
@@ -95,6 +106,9 @@ def mirror_control(x: Tensor, at: int = CONTROL_AT, n: int = N_CONTROL_GLOBAL) -
     v, rate = g[..., 1:4], g[..., 8:11]  # q_v and omega / rate limit
     qdot_v = -g[..., 5:8] + 2.0 * torch.cross(v, rate, dim=-1)  # qdot is scaled by 2 / rate limit
     m = torch.cat((g[..., :1], -v, g[..., 4:5], qdot_v, -g[..., 8:]), dim=-1)
+    if tail > 0:
+        end = x.shape[-1] - tail
+        return torch.cat((x[..., :at], m, x[..., at + n : end], -x[..., end:]), dim=-1)
     return torch.cat((x[..., :at], m, x[..., at + n :]), dim=-1)
 
 
@@ -164,6 +178,7 @@ def cell_observation(
     design_steps: int,
     phys: PhysState,
     rate_limit_rad_s: float,
+    last_command: Tensor | None = None,
 ) -> CellObs:
     """Features of B satellites, each in its own phase.
 
@@ -171,6 +186,8 @@ def cell_observation(
         grids: (B, N, N, N) integer cell types.
         design_step: (B,) long; d < design_steps while designing, >= design_steps flying.
         phys: global physical state (ignored for rows that are designing).
+        last_command: (B, C, 3) the action commanded at the previous control step, or None: the
+            :data:`N_LAST_COMMAND` features are appended only when it is given (module docstring).
     """
     B, N = grids.shape[0], grids.shape[1]
     C = N**3
@@ -219,8 +236,22 @@ def cell_observation(
         cpart = cpart * keep
     else:
         cpart = torch.zeros(B, C, N_CONTROL, device=dev)
-    x = torch.cat((common, dpart, cpart), dim=-1)
+    parts = [common, dpart, cpart]
+    if last_command is not None:
+        parts.append(last_command_features(flat, fly, last_command))
+    x = torch.cat(parts, dim=-1)
 
     act_mask = torch.where(design.unsqueeze(-1), torch.ones_like(flat, dtype=torch.bool), flat >= ACTUATOR)
     value_mask = torch.where(design.unsqueeze(-1), torch.ones_like(flat, dtype=torch.bool), flat != EMPTY)
     return CellObs(x=x, act_mask=act_mask, value_mask=value_mask, design=design)
+
+
+def last_command_features(flat: Tensor, fly: Tensor, last_command: Tensor) -> Tensor:
+    """(B, C, 6) the last command's features of flat grids (B, C) whose rows ``fly`` (B,): each wheel
+    unit's own command, and the mean over the wheel units on every module; zero on design rows."""
+    units = (flat >= ACTUATOR) & fly.unsqueeze(-1)
+    own = last_command.to(torch.float32) * units.unsqueeze(-1).to(torch.float32)
+    n = units.sum(dim=1, keepdim=True).clamp(min=1).to(torch.float32)
+    mean = own.sum(dim=1) / n
+    keep = ((flat != EMPTY) & fly.unsqueeze(-1)).unsqueeze(-1).to(torch.float32)
+    return torch.cat((own, mean.unsqueeze(1).expand_as(own) * keep), dim=-1)

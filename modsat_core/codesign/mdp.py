@@ -57,24 +57,39 @@ class Compact:
     q_TN: Tensor  # (B, 4) float32
     omega_B: Tensor  # (B, 3) float32
     h_cells: Tensor  # (B, C, 3) float16, wheel momentum / scale
+    #: (B, C, 3) float16, the action commanded at the previous control step (zero at a flight's first
+    #: step and while designing); None where the policy does not observe it (`training.observe_last_command`).
+    last_cmd: Tensor | None = None
 
     #: The replay's state fields, in its order (spec.limits.REPLAY_STATE: the layout's one table).
     FIELDS = tuple(name for name, _, _ in REPLAY_STATE)
 
     def as_dict(self, prefix: str = "") -> dict[str, Tensor]:
+        """The replay's state fields (not the last command: the replay keeps the observed state's only,
+        as ``obs_last_cmd``; the next state's is the transition's action, :func:`next_last_command`)."""
         return {prefix + k: getattr(self, k) for k in self.FIELDS}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Tensor], prefix: str = "") -> Compact:
-        return cls(**{k: d[prefix + k] for k in cls.FIELDS})
+    def from_dict(cls, d: dict[str, Tensor], prefix: str = "", last_cmd: Tensor | None = None) -> Compact:
+        return cls(**{k: d[prefix + k] for k in cls.FIELDS}, last_cmd=last_cmd)
+
+
+def next_last_command(design_step: Tensor, action: Tensor, design_steps: int) -> Tensor:
+    """(B, C, 3) the last command of the states a transition led to: its action where the observed state
+    flew (``design_step`` (B,) >= ``design_steps``), zero where it was designing (the flight it led to
+    starts with no command)."""
+    flew = (design_step.long() >= design_steps).reshape(-1, 1, 1)
+    return action * flew.to(action.dtype)
 
 
 def observe_compact(c: Compact, N: int, design_steps: int, rate_limit_rad_s: float) -> CellObs:
-    """Rebuild per-cell observations from compact rows (used when sampling the buffer)."""
+    """Rebuild per-cell observations from compact rows (used when sampling the buffer); with the last
+    command where the rows hold it."""
     B = c.grid.shape[0]
     phys = PhysState(q_BN=c.q_BN.float(), q_TN=c.q_TN.float(), omega_B=c.omega_B.float(), h_cells=c.h_cells.float())
+    last = None if c.last_cmd is None else c.last_cmd.float()
     return cell_observation(
-        c.grid.long().reshape(B, N, N, N), c.design_step.long(), design_steps, phys, rate_limit_rad_s
+        c.grid.long().reshape(B, N, N, N), c.design_step.long(), design_steps, phys, rate_limit_rad_s, last
     )
 
 
@@ -113,6 +128,13 @@ class CoDesignEnv:
         self.grids = torch.zeros(num_envs, self.N, self.N, self.N, dtype=torch.long, device=self.device)
         self.design_step = torch.zeros(num_envs, dtype=torch.long, device=self.device)
         self.ep_return = torch.zeros(num_envs, device=self.device)
+        # The last command (`training.observe_last_command`): what each row commanded at its previous
+        # control step, the policy's own action before any delay or weakening; zero when a flight starts.
+        self.observe_last = spec.training.observe_last_command
+        self.last_cmd = torch.zeros(num_envs, self.C, 3, device=self.device)
+        # Whether new flights draw conditions from `randomise`: from the start, or once its curriculum
+        # (`training.randomise_after_success`, read from the learning curve) switches it on: the trainer sets it.
+        self.randomising = spec.randomise.active and spec.training.randomise_after_success is None
         # Domain randomisation (the `randomise` section): the flight between the actor and the sim,
         # its conditions drawn per flight from a stream of their own.
         self.flight = Flight(self.sim, max_delay=spec.randomise.delay_steps if spec.randomise.active else 0, seed=seed)
@@ -130,6 +152,7 @@ class CoDesignEnv:
             q_TN=self.sim.q_TN.clone(),
             omega_B=st.omega_B.clone(),
             h_cells=(st.h_B / self.sim.h_scale_Nms).to(torch.float16),
+            last_cmd=self.last_cmd.to(torch.float16) if self.observe_last else None,
         )
 
     def observe(self) -> CellObs:
@@ -147,6 +170,7 @@ class CoDesignEnv:
             self.grids[idx] = torch.as_tensor(seed_grid(self.N), device=self.device)
             self.design_step[idx] = 0
         self.ep_return[idx] = 0.0
+        self.last_cmd[idx] = 0.0
 
     def _start_flight(self, idx: Tensor) -> None:
         if len(idx) == 0:
@@ -155,7 +179,8 @@ class CoDesignEnv:
         _, _, I_B = mass_properties_batched(self.grids[idx], m.module_mass_kg, m.module_size_m, dtype=torch.float32)
         self.sim.set_plants(idx, I_B, self.grids[idx].reshape(len(idx), -1) >= ACTUATOR)
         draws = [draw_episode(self.rngs[int(i)], self.spec.mission) for i in idx.tolist()]
-        if self.spec.randomise.active:
+        self.last_cmd[idx] = 0.0
+        if self.randomising:
             I_model = I_B.double().cpu().numpy()
             draws = self.flight.randomise(idx, self.spec.randomise, self.cond_rng, I_model, draws)
         self.sim.reset(idx, draws)
@@ -174,6 +199,7 @@ class CoDesignEnv:
 
         if bool(flying.any()):
             out = self.sim.step(self.flight.apply(actions))  # late and weak under `randomise`
+            self.last_cmd = torch.where(flying.reshape(B, 1, 1), actions.to(self.last_cmd.dtype), self.last_cmd)
             reward = torch.where(flying, out.reward, reward)
             terminal = flying & out.terminated
             done = flying & (out.terminated | out.truncated)
@@ -232,6 +258,7 @@ class CoDesignEnv:
             "design_rng": self.design_rng.bit_generator.state,
             "flight": self.flight.state_dict(),
             "cond_rng": self.cond_rng.bit_generator.state,
+            "last_cmd": self.last_cmd.clone(),
         }
 
     def load_state_dict(self, d: dict) -> None:
@@ -256,3 +283,5 @@ class CoDesignEnv:
         if "flight" in d:  # checkpoints from before domain randomisation have none (and need none)
             self.flight.load_state_dict(d["flight"])
             self.cond_rng.bit_generator.state = d["cond_rng"]
+        if "last_cmd" in d:  # checkpoints from before the last command have none (their specs do not observe it)
+            self.last_cmd.copy_(d["last_cmd"])

@@ -15,11 +15,11 @@ from modsat_core.agent.flat_networks import FlatCellActor, FlatCellCritic
 from modsat_core.agent.layers import finish
 from modsat_core.agent.networks import make_critic
 from modsat_core.agent.policy import design_with
-from modsat_core.agent.policy_file import actor_from_state, new_actor
+from modsat_core.agent.policy_file import actor_from_state, n_features_of, new_actor
 from modsat_core.agent.td3 import TD3, ReplayBuffer, TD3Config
 from modsat_core.artefacts import ProgressRecord
-from modsat_core.codesign.features import N_FEATURES, CellObs
-from modsat_core.codesign.mdp import CoDesignEnv, Compact, EnvStep, observe_compact
+from modsat_core.codesign.features import CellObs
+from modsat_core.codesign.mdp import CoDesignEnv, Compact, EnvStep, next_last_command, observe_compact
 from modsat_core.evaluation.run_files import curve_point
 from modsat_core.evaluation.selection import keep, validate
 from modsat_core.spec.jobspec import JobSpec
@@ -53,9 +53,11 @@ class TD3Run:
             actor = FlatCellActor(self.fixed_grid, hidden, self.t.odd_control)
             critic = FlatCellCritic(self.fixed_grid, hidden)
         else:
-            actor, critic = new_actor(spec), make_critic(self.t.network, N_FEATURES, hidden)
+            actor, critic = new_actor(spec), make_critic(self.t.network, n_features_of(self.t), hidden)
         self.agent = TD3(actor.to(device), critic.to(device), TD3Config.from_training(self.t))
-        self.buffer = ReplayBuffer(replay_fields(self.env.N), replay_capacity(self.t), device=device)
+        self.last_command = self.t.observe_last_command
+        fields = replay_fields(self.env.N, self.last_command)
+        self.buffer = ReplayBuffer(fields, replay_capacity(self.t), device=device)
         self.gen = torch.Generator(device=device).manual_seed(spec.seed)
         self.cpu_gen = torch.Generator().manual_seed(spec.seed + 1)
         self.rng = np.random.default_rng([spec.seed, 3])
@@ -70,6 +72,7 @@ class TD3Run:
         self.recent: list[dict] = []  # finished training episodes since the last progress call
         self.last_info: dict = {}
         self.explore_design = torch.ones(self.env.B, dtype=torch.bool, device=device)
+        self.env.randomising = self.randomising()
 
     # ------------------------------------------------------------------ acting
     def _act(self, obs: CellObs) -> torch.Tensor:
@@ -166,15 +169,17 @@ class TD3Run:
         obs_c = self.env.compact()
         action = self._act(observe_compact(obs_c, N, D, rl))
         st = self.env.step(action)
-        self.buffer.add(
-            {
-                **obs_c.as_dict("obs_"),
-                **st.next_state.as_dict("next_"),
-                "action": action,
-                "reward": st.reward,
-                "terminal": st.terminal,
-            }
-        )
+        row = {
+            **obs_c.as_dict("obs_"),
+            **st.next_state.as_dict("next_"),
+            "action": action,
+            "reward": st.reward,
+            "terminal": st.terminal,
+        }
+        if self.last_command:
+            assert obs_c.last_cmd is not None
+            row["obs_last_cmd"] = obs_c.last_cmd
+        self.buffer.add(row)
         self.env_steps += self.env.B
         if self.env_steps >= self.t.learning_starts and self.buffer.size >= self.t.batch_size:
             self.update_credit += self.env.B / self.t.train_frequency
@@ -188,7 +193,10 @@ class TD3Run:
         N, D, rl = self.env.N, self.env.D, self.spec.mission.rate_limit_rad_s
         # One feature pass over both halves of the transitions (half the small ops of two).
         pair = {k: torch.cat((b["obs_" + k], b["next_" + k])) for k in Compact.FIELDS}
-        both = observe_compact(Compact.from_dict(pair), N, D, rl)
+        last = None
+        if self.last_command:  # the next state's last command is this transition's action
+            last = torch.cat((b["obs_last_cmd"], next_last_command(b["obs_design_step"], b["action"], D)))
+        both = observe_compact(Compact.from_dict(pair, last_cmd=last), N, D, rl)
         n = self.t.batch_size
         obs, nxt = both.rows(0, n), both.rows(n, 2 * n)
         action = b["action"].float()
@@ -210,12 +218,29 @@ class TD3Run:
         gate = self.t.design_learning_after_success
         return gate is None or any(p.get("success_rate", 0.0) >= gate for p in self.curve)
 
+    def randomising(self) -> bool:
+        """Whether new training flights draw their conditions from `randomise`: with it active, from the
+        start or, with `randomise_after_success`, once an evaluation on the curve has landed that share of
+        its slews (read from the curve, so a resumed run keeps the switch)."""
+        if not self.spec.randomise.active:
+            return False
+        gate = self.t.randomise_after_success
+        return gate is None or any(p.get("success_rate", 0.0) >= gate for p in self.curve)
+
     def evaluate_now(self) -> dict:
         actor = self._eval_actor()
         grid = self.current_grid()
         point = curve_point(actor, grid, self.spec, self.env_steps, self.agent.updates, self.env.penalty)
+        # Whether the flights since the last point were randomised: once they were, the snapshots of the
+        # nominal training before it (the curriculum's first part) are not what the run ships.
+        randomised = self.env.randomising
+        if randomised:
+            self.kept = [s for s in self.kept if s.get("randomised", True)]
         self.curve.append(point)
         self.kept = keep(self.kept, point, actor, grid, self.t.select_top_k)
+        for s in self.kept:
+            s.setdefault("randomised", randomised)
+        self.env.randomising = self.randomising()
         return point
 
     def progress(self, total: int, point: dict | None) -> dict:
@@ -287,3 +312,4 @@ class TD3Run:
         # Checkpoints of the removed `exploration_noise_min` hold each episode's noise draw,
         # "noise_u": not read (a run that set the key does not load, docs/lab/2026-12-05-unused-knobs-removed.md).
         self.explore_design.copy_(d["explore_design"])
+        self.env.randomising = self.randomising()
