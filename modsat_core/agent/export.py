@@ -1,8 +1,9 @@
 """A trained policy's standalone controller in the formats other software loads (docs/export.md).
 
 Every run with a valid design writes the controller of :func:`~modsat_core.agent.policy.exported`,
-``forward(q_BT (B, 4), omega_B (B, 3), h_B (B, K, 3)) -> per-unit body torque command (B, K, 3)``,
-in three files:
+``forward(q_BT (B, 4), omega_B (B, 3), h_B (B, K, 3)) -> per-unit body torque command (B, K, 3)``
+(and a fourth input, ``tau_last_B`` (B, K, 3), the command it returned at the previous control step,
+for a TD3 policy that observes its last command: `training.observe_last_command`), in three files:
 
 ``policy_export.pt2``
     A ``torch.export`` program (``torch.export.load(path).module()``), batch size dynamic.
@@ -29,6 +30,7 @@ import torch
 from torch import Tensor, nn
 
 import modsat_core
+from modsat_core.agent.networks import observes_last_command
 from modsat_core.agent.onnx_meta import conventions, with_metadata
 from modsat_core.agent.policy import exported
 from modsat_core.grid import ACTUATOR
@@ -39,6 +41,8 @@ log = logging.getLogger(__name__)
 
 #: The exported controller's inputs and output, by name (the ONNX graph's names too).
 INPUT_NAMES = ("q_BT", "omega_B", "h_B")
+#: ... and the fourth input of a policy that observes its last command (`training.observe_last_command`).
+LAST_COMMAND_INPUT = "tau_last_B"
 OUTPUT_NAME = "tau_cmd_B"
 #: ONNX operator set of ``policy_export.onnx``.
 ONNX_OPSET = 20
@@ -56,25 +60,40 @@ def export_torchscript(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> byt
     return buf.getvalue()
 
 
-def example_inputs(n_wheels: int, batch: int = 2) -> tuple[Tensor, Tensor, Tensor]:
-    """Inputs of the exported controller (float32): a unit quaternion, a rate, wheel momenta.
+def input_names(actor: nn.Module) -> tuple[str, ...]:
+    """The exported controller's inputs: :data:`INPUT_NAMES`, and :data:`LAST_COMMAND_INPUT` last where
+    the actor observes its last command."""
+    return (*INPUT_NAMES, LAST_COMMAND_INPUT) if observes_last_command(actor) else INPUT_NAMES
+
+
+def example_inputs(n_wheels: int, batch: int = 2, last_command: bool = False) -> tuple[Tensor, ...]:
+    """Inputs of the exported controller (float32): a unit quaternion, a rate, wheel momenta (and, with
+    ``last_command``, a last command).
 
     ``batch`` >= 2: torch.export fixes a dimension whose example size is 1."""
     gen = torch.Generator().manual_seed(0)
     q = torch.nn.functional.normalize(torch.randn(batch, 4, generator=gen), dim=-1)
-    return q, 0.01 * torch.randn(batch, 3, generator=gen), 0.001 * torch.randn(batch, n_wheels, 3, generator=gen)
+    out: tuple[Tensor, ...] = (
+        q,
+        0.01 * torch.randn(batch, 3, generator=gen),
+        0.001 * torch.randn(batch, n_wheels, 3, generator=gen),
+    )
+    if last_command:
+        out = (*out, 0.01 * torch.randn(batch, n_wheels, 3, generator=gen))
+    return out
 
 
 def export_program(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> torch.export.ExportedProgram:
     """:func:`exported` captured by ``torch.export`` for float32 inputs of any batch size."""
     K = int((np.asarray(grid) >= ACTUATOR).sum())
     batch = torch.export.Dim.DYNAMIC
+    names = input_names(actor)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)  # torch's own pytree deprecations
         return torch.export.export(
             exported(actor, grid, spec).eval(),
-            example_inputs(K),
-            dynamic_shapes={name: {0: batch} for name in INPUT_NAMES},
+            example_inputs(K, last_command=len(names) > len(INPUT_NAMES)),
+            dynamic_shapes={name: {0: batch} for name in names},
         )
 
 
@@ -87,8 +106,9 @@ def program_bytes(program: torch.export.ExportedProgram) -> bytes:
     return buf.getvalue()
 
 
-def onnx_bytes(program: torch.export.ExportedProgram) -> bytes:
-    """``policy_export.onnx``: the program translated by torch's exporter (needs ``onnxscript``)."""
+def onnx_bytes(program: torch.export.ExportedProgram, names: tuple[str, ...] = INPUT_NAMES) -> bytes:
+    """``policy_export.onnx``: the program translated by torch's exporter (needs ``onnxscript``), its
+    inputs named ``names``."""
     onnx_logger = logging.getLogger("torch.onnx")
     level = onnx_logger.level
     onnx_logger.setLevel(logging.ERROR)  # it lists every optional operator library it skips (torchvision)
@@ -98,7 +118,7 @@ def onnx_bytes(program: torch.export.ExportedProgram) -> bytes:
             onnx_program = torch.onnx.export(
                 program,
                 dynamo=True,
-                input_names=list(INPUT_NAMES),
+                input_names=list(names),
                 output_names=[OUTPUT_NAME],
                 opset_version=ONNX_OPSET,
                 verbose=False,
@@ -110,20 +130,23 @@ def onnx_bytes(program: torch.export.ExportedProgram) -> bytes:
     return onnx_program.model_proto.SerializeToString()
 
 
-def _onnx_with_metadata(data: bytes, grid: np.ndarray, spec: JobSpec, doc: str) -> bytes:
+def _onnx_with_metadata(data: bytes, grid: np.ndarray, spec: JobSpec, doc: str, last_command: bool = False) -> bytes:
     """The ONNX file with its conventions as metadata, or without them (said on stderr) where they cannot
     be worked out: the controller is worth shipping either way."""
     try:
-        return with_metadata(data, onnx_metadata(grid, spec), doc)
+        return with_metadata(data, onnx_metadata(grid, spec, last_command=last_command), doc)
     except Exception as exc:
         _left_out("policy_export.onnx's metadata", exc)
         return data
 
 
-def onnx_metadata(grid: np.ndarray, spec: JobSpec, job_id: int | None = None) -> dict[str, str]:
+def onnx_metadata(
+    grid: np.ndarray, spec: JobSpec, job_id: int | None = None, last_command: bool = False
+) -> dict[str, str]:
     """The ONNX file's ``metadata_props``: control step, torque scale, wheel order and frames, the
     hash of the run's ``spec.json``, the job id (empty where the run does not know it: the worker stamps
-    it), modsat's version, the input and output layout and the design (docs/export.md)."""
+    it), modsat's version, the input and output layout (``last_command``: with ``tau_last_B``) and the
+    design (docs/export.md)."""
     torque_max = spec.modules.torque_scale_Nm * Design.from_grid(grid, spec.modules).slot_weights()[0]
     return conventions(
         version=modsat_core.__version__,
@@ -134,6 +157,7 @@ def onnx_metadata(grid: np.ndarray, spec: JobSpec, job_id: int | None = None) ->
         unit_torque_max_Nm=[float(t) for t in torque_max],
         grid=np.asarray(grid).tolist(),
         job_id=job_id,
+        last_command=last_command,
     )
 
 
@@ -147,10 +171,12 @@ def export_files(actor: nn.Module, grid: np.ndarray, spec: JobSpec) -> dict[str,
     except Exception as exc:
         _left_out("policy_export.pt2 and policy_export.onnx", exc)
         return files
-    doc = "modsat attitude controller: tau_cmd_B = controller(q_BT, omega_B, h_B); see metadata_props"
+    names = input_names(actor)
+    last = len(names) > len(INPUT_NAMES)
+    doc = f"modsat attitude controller: {OUTPUT_NAME} = controller({', '.join(names)}); see metadata_props"
     writers: dict[str, Callable[[torch.export.ExportedProgram], bytes]] = {
         "policy_export.pt2": program_bytes,
-        "policy_export.onnx": lambda p: _onnx_with_metadata(onnx_bytes(p), grid, spec, doc),
+        "policy_export.onnx": lambda p: _onnx_with_metadata(onnx_bytes(p, names), grid, spec, doc, last),
     }
     for name, write in writers.items():
         try:

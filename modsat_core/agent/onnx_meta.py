@@ -44,6 +44,11 @@ INPUTS = (
     "q_BT (B, 4) float32 error quaternion w,x,y,z, unit; omega_B (B, 3) float32 body rate rad/s in B; "
     "h_B (B, K, 3) float32 momentum of each wheel unit N m s in B (zeros for ideal-torque); B free, K = wheel_units"
 )
+#: Appended to INPUTS for a controller that observes its last command (`training.observe_last_command`).
+LAST_COMMAND_INPUT = (
+    "; tau_last_B (B, K, 3) float32 the tau_cmd_B this controller returned at the previous control step, N m "
+    "(zeros at a slew's first step): feed its output back, it keeps no memory"
+)
 OUTPUTS = (
     "tau_cmd_B (B, K, 3) float32 body torque command of each wheel unit, N m in B, each component within "
     "+-unit_torque_max_Nm; the wheel gets -tau (dh_k/dt = -tau_k)"
@@ -65,6 +70,7 @@ def conventions(
     unit_torque_max_Nm: list[float],
     grid: list,
     job_id: int | str | None = None,
+    last_command: bool = False,
 ) -> dict[str, str]:
     """The metadata of one exported controller, every value a string (ONNX's ``StringStringEntryProto``)."""
     props: dict[str, Any] = {
@@ -78,7 +84,7 @@ def conventions(
         "modsat.wheel_units": str(len(unit_torque_max_Nm)),
         "modsat.wheel_order": WHEEL_ORDER,
         "modsat.frames": FRAMES,
-        "modsat.inputs": INPUTS,
+        "modsat.inputs": INPUTS + (LAST_COMMAND_INPUT if last_command else ""),
         "modsat.outputs": OUTPUTS,
         "modsat.design_grid": json.dumps(grid, separators=(",", ":")),
     }

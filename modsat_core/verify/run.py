@@ -98,25 +98,40 @@ class Run:
         return cls(spec, grid, policy.eval(), None)
 
 
+def takes_last_command(module: torch.jit.ScriptModule) -> bool:
+    """Whether an exported controller's ``forward`` takes the last command (``tau_last_B``, a fourth
+    input: a policy trained with `training.observe_last_command`; docs/export.md)."""
+    schema = module.forward.schema  # type: ignore[attr-defined]  # a ScriptMethod's
+    return len(schema.arguments) > 4  # self, q_BT, omega_B, h_B
+
+
 class ExportedPolicy:
     """The exported TorchScript controller as a :class:`SlewSim` controller.
 
     Both simulators call it on the same kind of state (a SlewSim holding the state), so the
-    policy sees the same inputs in both up to the simulators' differences.
+    policy sees the same inputs in both up to the simulators' differences. One instance flies one
+    set of slews from their start (the factory makes one per flight): a controller that takes its
+    last command is given the command it returned at the previous call, zeros at the first.
     """
 
     def __init__(self, module: torch.jit.ScriptModule, tau_max_Nm: float):
         self.module, self.tau_max = module, tau_max_Nm
+        self.last_command = takes_last_command(module)
+        self.last: torch.Tensor | None = None  # (B, K, 3) N m, the previous call's command
 
     def __call__(self, sim: SlewSim) -> torch.Tensor:
         # One row at a time: a float32 network's output can depend on the batch size in the
         # last bit, and Basilisk flies one satellite at a time.
+        q, w, h = sim.error_quaternion(), sim.state.omega_B, sim.state.h_B
         with torch.no_grad():
-            rows = [
-                self.module(sim.error_quaternion()[i : i + 1], sim.state.omega_B[i : i + 1], sim.state.h_B[i : i + 1])
-                for i in range(sim.B)
-            ]
-        return torch.cat(rows).to(sim.dtype) / self.tau_max
+            if self.last_command:
+                last = torch.zeros_like(h) if self.last is None else self.last
+                rows = [self.module(q[i : i + 1], w[i : i + 1], h[i : i + 1], last[i : i + 1]) for i in range(sim.B)]
+            else:
+                rows = [self.module(q[i : i + 1], w[i : i + 1], h[i : i + 1]) for i in range(sim.B)]
+        tau = torch.cat(rows)
+        self.last = tau.to(h.dtype)
+        return tau.to(sim.dtype) / self.tau_max
 
 
 def policy_factory(module: torch.jit.ScriptModule, tau_max_Nm: float) -> ControllerFactory:
