@@ -31,7 +31,9 @@ enters the rate equation as a linear function of time.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import cast
 
 import torch
 from torch import Tensor
@@ -207,15 +209,22 @@ def physics_step(state: State, plant: Plant, tau_cmd_B: Tensor, dt_s: float) -> 
     return State(q_BN=q1, omega_B=w1, h_B=h1, t_s=t_end), tau_c
 
 
-def control_step(state: State, plant: Plant, tau_cmd_B: Tensor, dt_s: float, frame_skip: int) -> tuple[State, Tensor]:
-    """Hold the command (B, K, 3) for ``frame_skip`` physics steps.
+PhysicsStep = Callable[[State, Plant, Tensor, float], tuple[State, Tensor]]
+
+
+def control_step(
+    state: State, plant: Plant, tau_cmd_B: Tensor, dt_s: float, frame_skip: int, step: PhysicsStep | None = None
+) -> tuple[State, Tensor]:
+    """Hold the command (B, K, 3) for ``frame_skip`` physics steps (of ``step``: :func:`physics_step`,
+    or :func:`compiled_physics_step`'s fused kernel).
 
     Returns the new state and the mean body control torque delivered over the interval,
     (B, 3) N m, for effort metrics.
     """
+    step = physics_step if step is None else step
     delivered = torch.zeros_like(state.omega_B)
     for _ in range(frame_skip):
-        state, tau_c = physics_step(state, plant, tau_cmd_B, dt_s)
+        state, tau_c = step(state, plant, tau_cmd_B, dt_s)
         delivered = delivered + tau_c
     return state, delivered / frame_skip
 
@@ -229,3 +238,18 @@ def angular_momentum_N(state: State, plant: Plant) -> Tensor:
 def kinetic_energy(state: State, plant: Plant) -> Tensor:
     """Rotational kinetic energy of the body, (B,) J (wheel inertia is not modelled)."""
     return 0.5 * (state.omega_B * _matvec(plant.I_B, state.omega_B)).sum(-1)
+
+
+_COMPILED: PhysicsStep | None = None
+
+
+def compiled_physics_step() -> PhysicsStep:
+    """:func:`physics_step` fused by ``torch.compile`` (inductor: one C++ kernel per RK4 step on a CPU,
+    forward and backward), built once per process. The first call of each new shape compiles (minutes on
+    a 2-core CPU; inductor's on-disk cache makes a later process's first call faster); the numbers
+    agree with :func:`physics_step` to float rounding, not bit for bit (docs/diffsim.md, "Compiled
+    physics")."""
+    global _COMPILED
+    if _COMPILED is None:
+        _COMPILED = cast(PhysicsStep, torch.compile(physics_step, dynamic=None))
+    return _COMPILED

@@ -176,8 +176,10 @@ class SlewSim:
         dtype: torch.dtype = torch.float32,
         device: str | torch.device = "cpu",
         momentum_weight: np.ndarray | Tensor | None = None,
+        compiled: bool = False,
     ):
-        """B satellites given by their inertia (B, 3, 3) and wheel-unit slots (B, K) bool.
+        """B satellites given by their inertia (B, 3, 3) and wheel-unit slots (B, K) bool; ``compiled``:
+        the physics step fused by ``torch.compile`` (:func:`~modsat_core.sim.dynamics.compiled_physics_step`).
 
         A floating-point ``actuator_mask`` weighs each slot instead (in [0, 1]): a relaxed grid's
         probability of a wheel unit in a cell, whose torque and momentum the slot scales by it, so
@@ -185,6 +187,7 @@ class SlewSim:
         relaxed design gradient)."""
         self.mission, self.modules = mission, modules
         self.dtype, self.device = dtype, torch.device(device)
+        self.physics_step = dyn.compiled_physics_step() if compiled else dyn.physics_step
         kw: dict[str, Any] = dict(dtype=dtype, device=self.device)
         I_B = torch.as_tensor(I_B, **kw).clone()
         mask = torch.as_tensor(actuator_mask, device=self.device)
@@ -359,7 +362,9 @@ class SlewSim:
         m, acc = self.mission, self.metrics
         a = action.to(self.dtype).clamp(-1.0, 1.0) * self.plant.slots.unsqueeze(-1)
         tau_cmd = a * self.plant.tau_max_Nm
-        self.state, tau_c = dyn.control_step(self.state, self.plant, tau_cmd, m.physics_dt_s, m.frame_skip)
+        self.state, tau_c = dyn.control_step(
+            self.state, self.plant, tau_cmd, m.physics_dt_s, m.frame_skip, self.physics_step
+        )
         self.steps += 1
         phi = quat.error_angle(self.error_quaternion())
         omega_norm = self.state.omega_B.norm(dim=-1)

@@ -63,6 +63,15 @@ class Diffsim(_Section):
             "flies the mission's physics."
         ),
     )
+    compiled: bool = Field(
+        False,
+        description=(
+            "Fuse the training simulator's RK4 step with torch.compile (one kernel per step, forward and "
+            "backward). Pays on long runs: the first step compiles for minutes on a 2-core CPU, then each "
+            "training step is faster (`modsat bench sim`'s compiled rows; docs/diffsim.md, \"Compiled "
+            'physics"). Evaluation flies the eager simulator.'
+        ),
+    )
     hidden_sizes: list[Annotated[int, Field(ge=4, le=1024)]] = Field(
         default_factory=lambda: [64, 64], min_length=1, max_length=4, description="tanh layers of the controller."
     )

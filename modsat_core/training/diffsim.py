@@ -124,6 +124,7 @@ class DiffsimRun:
             spec.modules,
             dtype=torch.float32,
             device=device,
+            compiled=self.d.compiled,
         )
         W, T = self.d.window_steps, self.d.episode_steps
         # Staggered first slews: row i's first slew ends after a random whole number of windows,

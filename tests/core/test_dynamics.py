@@ -191,3 +191,23 @@ def test_float32_default_and_float64_agree_to_float32_precision():
         s = run(s, plant, torch.full((1, 1, 3), 0.01, dtype=dt), steps=50)
         out[dt] = s.q_BN[0].double()
     assert (out[torch.float32] - out[torch.float64]).abs().max().item() < 1e-5
+
+
+@pytest.mark.slow  # compiles the RK4 step (inductor, forward only): a minute or more on a busy 2-core CPU
+def test_the_compiled_physics_step_flies_as_the_eager_one():
+    """``diffsim.compiled``'s fused step flies the same slew as :func:`physics_step`, to float32 rounding,
+    with gravity gradient and the wheels reaching their capacity on the way. (Its backward is torch's
+    own autograd of the same graph; compiling it too would double this test's time.)"""
+    I = asymmetric_inertia()
+    plant = make_plant(I, wheels=True, h_max=1e-3, n=1.1e-3, phase=0.3, dtype=torch.float32)
+    tau = torch.tensor([[[0.02, -0.01, 0.015]]])
+    out = {}
+    with torch.no_grad():
+        for name, step in (("eager", dyn.physics_step), ("compiled", dyn.compiled_physics_step())):
+            s = make_state([1.0, 0, 0, 0], [0.1, 0.0, -0.1], dtype=torch.float32)
+            for _ in range(5):
+                s, _ = dyn.control_step(s, plant, tau, DT, 4, step)
+            out[name] = (s.q_BN, s.omega_B, s.h_B)
+    assert out["eager"][2].abs().max() == pytest.approx(1e-3)  # a wheel at its capacity
+    for eager, compiled in zip(out["eager"], out["compiled"], strict=True):
+        assert torch.allclose(eager, compiled, rtol=1e-4, atol=1e-6)
