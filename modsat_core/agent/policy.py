@@ -172,7 +172,7 @@ class ExportedLastCommandController(_Exported):
         x = self.features(q_BT, omega_B, h_B)
         B, C = x.shape[0], x.shape[1]
         a_last = tau_last_B.to(x.dtype) / self.tau_max  # the actions in [-1, 1] it came from
-        own = torch.zeros(B, C, 3, dtype=x.dtype)
+        own = x.new_zeros(B, C, 3)
         own[:, self.act_cells] = a_last
         mean = a_last.mean(dim=1).unsqueeze(1) * self.occupied  # (B, C, 3): on every module
         return self.command(torch.cat((x, own, mean), dim=-1))

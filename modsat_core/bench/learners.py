@@ -107,6 +107,9 @@ def td3_row(design: str, spec: JobSpec, wall_s: float, pd: dict) -> dict:
     """A TD3 row of ``spec`` trained for ``wall_s`` seconds (flat MLP, `modsat bench control`)."""
     from modsat_core.bench.control import bench_control
 
+    # the flat network has neither the last command nor the curriculum (TD3Run says so where a spec asks)
+    flat = spec.training.model_copy(update={"observe_last_command": False, "randomise_after_success": None})
+    spec = spec.model_copy(update={"training": flat})
     out = bench_control(spec, eval_every=10**9, max_wall_s=wall_s)  # evaluated once, at the end
     row = _row("td3", design, spec.seed, out["train_s"], out["best"], pd)
     row["env_steps"] = out["env_steps"]

@@ -158,7 +158,8 @@ class Training(_Section):
         gt=0.0,
         le=1.0,
         description=(
-            "A curriculum for `randomise`: training flights are nominal until an evaluation on the learning "
+            "TD3 only (the first-order learner randomises from its first flight). A curriculum for "
+            "`randomise`: training flights are nominal until an evaluation on the learning "
             "curve (`eval_episodes` nominal slews, the deterministic policy) lands at least this share of its "
             "slews; every flight that starts after it draws its flight conditions from `randomise`, to the "
             "end of the run. Read from the curve, so a resumed run keeps the switch. Once it has happened, the "

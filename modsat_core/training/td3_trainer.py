@@ -50,6 +50,12 @@ class TD3Run:
         actor: torch.nn.Module
         critic: torch.nn.Module
         if flat and self.fixed_grid is not None:
+            if self.t.observe_last_command or self.t.randomise_after_success is not None:
+                raise ValueError(
+                    "the flat TD3 controller (modsat bench control) neither observes its last command nor "
+                    "follows the randomise curriculum: set training.observe_last_command false and "
+                    "training.randomise_after_success null"
+                )
             actor = FlatCellActor(self.fixed_grid, hidden, self.t.odd_control)
             critic = FlatCellCritic(self.fixed_grid, hidden)
         else:

@@ -196,8 +196,9 @@ def test_float32_default_and_float64_agree_to_float32_precision():
 @pytest.mark.slow  # compiles the RK4 step (inductor, forward only): a minute or more on a busy 2-core CPU
 def test_the_compiled_physics_step_flies_as_the_eager_one():
     """``diffsim.compiled``'s fused step flies the same slew as :func:`physics_step`, to float32 rounding,
-    with gravity gradient and the wheels reaching their capacity on the way. (Its backward is torch's
-    own autograd of the same graph; compiling it too would double this test's time.)"""
+    with gravity gradient and the wheels reaching their capacity on the way. Inductor compiles the
+    backward pass too (what training runs); it is not compared here, since compiling it would double this
+    test's minutes: `modsat bench sim --compiled`'s window rows run it."""
     I = asymmetric_inertia()
     plant = make_plant(I, wheels=True, h_max=1e-3, n=1.1e-3, phase=0.3, dtype=torch.float32)
     tau = torch.tensor([[[0.02, -0.01, 0.015]]])

@@ -122,3 +122,14 @@ def test_cli_bench_control_rejects_bad_sizes(tiny, tmp_path, capsys):
     assert main(["bench", "control", str(spec_path), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "Is a directory" in err and str(tmp_path) in err
+
+
+def test_the_flat_network_refuses_what_it_cannot_observe(tmp_path, capsys):
+    """A TD3 preset's last command and curriculum: a readable refusal, not a run that ignores them."""
+    spec = tiny_spec(training__observe_last_command=True)
+    with pytest.raises(ValueError, match="observe_last_command"):
+        TD3Run(spec, fixed_grid=reference_design(3), flat=True)
+    path = tmp_path / "spec.json"
+    path.write_text(tiny_spec(training__randomise_after_success=0.5).model_dump_json())
+    with pytest.raises(SystemExit, match="randomise_after_success"):
+        main(["bench", "control", str(path)])
