@@ -84,12 +84,24 @@ def _rate(fn, min_seconds: float) -> tuple[int, float]:
 SLOT_COUNTS = (8, 32, 128, 900)
 
 
+#: Control steps of one ``compiled`` window row: a first-order training window, the cost of its steps
+#: backpropagated (``diffsim.window_steps``' default is 32; fewer keep the bench short).
+WINDOW_STEPS = 8
+
+
 def bench_sim(
-    batch_sizes=(1, 256, 4096), min_seconds: float = 2.0, dtype: str = "float32", slot_counts=SLOT_COUNTS
+    batch_sizes=(1, 256, 4096),
+    min_seconds: float = 2.0,
+    dtype: str = "float32",
+    slot_counts=SLOT_COUNTS,
+    compiled: bool = False,
 ) -> dict:
     """Control steps per second of the batched simulator and of the numpy reference; and of the
     simulator at batch 256 with ``slot_counts`` wheel-unit slots, one of them holding a unit (the cost
-    of empty slots)."""
+    of empty slots). With ``compiled``, the physics step fused by ``torch.compile`` beside the eager
+    one at batch 256, in the same run: flying (no gradient) and a training window of
+    :data:`WINDOW_STEPS` control steps backpropagated (``window_*`` rows); each compiled row's
+    ``compile_s`` is its first call, the compilation (inductor caches it on disk for later processes)."""
     spec = JobSpec()
     mission, modules = spec.mission, spec.modules
     design = Design.from_grid(reference_design(3), modules)
@@ -126,9 +138,15 @@ def bench_sim(
         action = torch.full((B, K, 3), 0.01, dtype=torch_dtype)
         n, el = _rate(lambda sim=sim, action=action: sim.step(action), min_seconds)
         results[f"slots_{K}"] = {"batch": B, "slots": K, "control_steps_per_s": B * n / el}
+    if compiled:
+        results.update(_compiled_rows(design, draw, mission, modules, torch_dtype, min_seconds))
     base = results["numpy_1"]["control_steps_per_s"]
     for r in results.values():
         r["ratio_to_numpy"] = r["control_steps_per_s"] / base
+    for kind in ("fly", "window"):
+        if f"{kind}_256_compiled" in results:
+            eager, fused = results[f"{kind}_256_eager"], results[f"{kind}_256_compiled"]
+            fused["ratio_to_eager"] = fused["control_steps_per_s"] / eager["control_steps_per_s"]
     return {
         "benchmark": "sim",
         "unit": "control steps per second (each = frame_skip RK4 steps)",
@@ -139,3 +157,33 @@ def bench_sim(
         "machine": platform.machine(),
         "results": results,
     }
+
+
+def _compiled_rows(design, draw, mission, modules, dtype, min_seconds: float) -> dict:
+    """The ``fly_256_*`` and ``window_256_*`` rows, eager and compiled (:func:`bench_sim`)."""
+    B, rows = 256, {}
+    for name in ("eager", "compiled"):
+        sim = SlewSim.from_designs([design] * B, mission, modules, dtype=dtype, compiled=name == "compiled")
+        sim.reset(list(range(B)), [draw] * B)
+        action = torch.full((B, sim.K, 3), 0.01, dtype=dtype)
+
+        def fly(sim=sim, action=action):
+            with torch.no_grad():
+                sim.step(action)
+
+        def window(sim=sim, action=action):
+            a = action.clone().requires_grad_(True)
+            cost = sum(sim.step(a).phi_rad.sum() for _ in range(WINDOW_STEPS))
+            cost.backward()
+            sim.detach()
+
+        for kind, fn, steps in (("fly", fly, 1), ("window", window, WINDOW_STEPS)):
+            t0 = time.perf_counter()
+            fn()
+            first = time.perf_counter() - t0
+            n, el = _rate(fn, min_seconds)
+            row = {"batch": B, "control_steps_per_s": B * steps * n / el, "first_call_s": first}
+            if name == "compiled":
+                row["compile_s"] = first
+            rows[f"{kind}_256_{name}"] = row
+    return rows

@@ -95,6 +95,7 @@ def monte_carlo(
     dtype: torch.dtype = torch.float64,
     device: str = "cpu",
     slews: int | None = None,
+    compiled: bool = False,
 ) -> MonteCarloResult:
     """Fly ``episodes`` seeded slews in one batch and collect their metrics.
 
@@ -105,12 +106,13 @@ def monte_carlo(
         record: number of leading episodes whose time histories are returned.
         slews: if set, episode i flies slew ``i % slews`` of the seed's set (several designs
             on the same slews); else episode i flies slew i.
+        compiled: the physics step fused by ``torch.compile`` (``diffsim.compiled``'s design scoring).
     """
     if isinstance(designs, Design):
         designs = [designs] * episodes
     if len(designs) != episodes:
         raise ValueError(f"{len(designs)} designs for {episodes} episodes")
-    sim = SlewSim.from_designs(designs, mission, modules, dtype=dtype, device=device)
+    sim = SlewSim.from_designs(designs, mission, modules, dtype=dtype, device=device, compiled=compiled)
     draws = [draw_episode(r, mission) for r in episode_rngs(seed, slews or episodes)]
     sim.reset(list(range(episodes)), [draws[i % len(draws)] for i in range(episodes)])
     return _fly(Flight(sim), controller, mission, record)

@@ -176,7 +176,15 @@ def score_designs(
     dtype = torch.float64 if exact else torch.float32
     with torch.no_grad():
         mc = monte_carlo(
-            designs, controller, mission, spec.modules, episodes=len(designs), seed=seed, dtype=dtype, slews=slews
+            designs,
+            controller,
+            mission,
+            spec.modules,
+            episodes=len(designs),
+            seed=seed,
+            dtype=dtype,
+            slews=slews,
+            compiled=spec.diffsim.compiled and not exact,  # the training's design scores, not the validation
         )
     for j, i in enumerate(valid):
         out[i] = objective_s(mc.episodes[j * slews : (j + 1) * slews], grids[i], obj, episode_s, spec.modules)

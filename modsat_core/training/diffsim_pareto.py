@@ -96,6 +96,7 @@ def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: i
             seed=seed,
             dtype=torch.float64 if exact else torch.float32,
             slews=slews,
+            compiled=spec.diffsim.compiled and not exact,  # the training's design scores, not the validation
         )
     for j, i in enumerate(valid):
         out[i] = mc.episodes[j * slews : (j + 1) * slews]
