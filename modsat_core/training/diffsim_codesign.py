@@ -151,29 +151,25 @@ def satellites(raw: np.ndarray, fixed: np.ndarray, types: np.ndarray) -> np.ndar
     return np.where(reached, raw, EMPTY).astype(np.int64)
 
 
-def score_designs(
+def fly_grids(
     spec: JobSpec, controller: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool
-) -> list[float]:
-    """The objective of each grid flown on the same ``slews`` slews of ``seed`` by ``controller``:
-    a design-conditioned :class:`~modsat_core.agent.diffsim_policy.DiffsimPolicy`, or a controller
-    class such as :class:`~modsat_core.sim.pd.PDController`. The training physics in float32, or
-    the mission's in float64 when ``exact``. A grid without a wheel unit scores worse than any
-    valid design."""
+) -> list[list[dict]]:
+    """Each grid flown by ``controller`` on the same ``slews`` slews of ``seed``: its monte_carlo rows.
+    ``controller``: a design-conditioned :class:`~modsat_core.agent.diffsim_policy.DiffsimPolicy`, or a
+    controller class such as :class:`~modsat_core.sim.pd.PDController`. The training physics in float32
+    (compiled with ``diffsim.compiled``), or the mission's in float64 when ``exact``. A grid without a
+    wheel unit gets no rows."""
     from modsat_core.agent.diffsim_policy import DiffsimPolicy
     from modsat_core.agent.policy import controller_for
 
-    obj = spec.objective
     mission = spec.mission if exact else training_mission(spec.mission, spec.diffsim.substeps)
-    episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
-    worst = episode_s + spec.design.grid_size**3 * (obj.module_price_s + obj.wheel_price_s)
     valid = [i for i, g in enumerate(grids) if (g >= ACTUATOR).any()]
-    out = [worst] * len(grids)
+    out: list[list[dict]] = [[] for _ in grids]
     if not valid:
         return out
     designs = [Design.from_grid(grids[i], spec.modules) for i in valid for _ in range(slews)]
     if isinstance(controller, DiffsimPolicy):
         controller = controller_for(controller, grids[valid[0]], spec)
-    dtype = torch.float64 if exact else torch.float32
     with torch.no_grad():
         mc = monte_carlo(
             designs,
@@ -182,13 +178,27 @@ def score_designs(
             spec.modules,
             episodes=len(designs),
             seed=seed,
-            dtype=dtype,
+            dtype=torch.float64 if exact else torch.float32,
             slews=slews,
             compiled=spec.diffsim.compiled and not exact,  # the training's design scores, not the validation
         )
     for j, i in enumerate(valid):
-        out[i] = objective_s(mc.episodes[j * slews : (j + 1) * slews], grids[i], obj, episode_s, spec.modules)
+        out[i] = mc.episodes[j * slews : (j + 1) * slews]
     return out
+
+
+def score_designs(
+    spec: JobSpec, controller: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool
+) -> list[float]:
+    """The objective of each grid flown on the same ``slews`` slews of ``seed`` by ``controller``
+    (:func:`fly_grids`). A grid without a wheel unit scores worse than any valid design."""
+    obj = spec.objective
+    episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
+    worst = episode_s + spec.design.grid_size**3 * (obj.module_price_s + obj.wheel_price_s)
+    flown = fly_grids(spec, controller, grids, slews, seed, exact)
+    return [
+        objective_s(eps, g, obj, episode_s, spec.modules) if eps else worst for eps, g in zip(flown, grids, strict=True)
+    ]
 
 
 def draw_grids(

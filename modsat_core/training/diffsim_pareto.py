@@ -42,7 +42,7 @@ import torch
 
 from modsat_core.agent.policy import controller_for
 from modsat_core.agent.policy_file import actor_from_state
-from modsat_core.evaluation.monte_carlo import monte_carlo, monte_carlo_conditions
+from modsat_core.evaluation.monte_carlo import monte_carlo_conditions
 from modsat_core.grid import ACTUATOR, EMPTY
 from modsat_core.sim.slew import Design
 from modsat_core.spec.evaluation import Condition
@@ -50,7 +50,7 @@ from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.limits import TRADE_OFF_EXTRA_CANDIDATES
 from modsat_core.spec.parts import design_mass_kg, design_power_W
 from modsat_core.spec.requirements import judged, requirement_verdict
-from modsat_core.training.diffsim import DiffsimRun, training_mission
+from modsat_core.training.diffsim import DiffsimRun
 from modsat_core.training.diffsim_codesign import (
     TOP_DRAWS,
     best_from_state,
@@ -59,6 +59,7 @@ from modsat_core.training.diffsim_codesign import (
     draw_grids,
     first_designs,
     fixed_cells,
+    fly_grids,
     grid_log_prob,
     initial_logits,
     load_design_state,
@@ -76,31 +77,8 @@ ARCHIVE_CANDIDATES = TRADE_OFF_EXTRA_CANDIDATES
 
 
 def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[list[dict]]:
-    """Each grid flown by ``policy`` on the same ``slews`` slews of ``seed``: its monte_carlo rows (the
-    training physics in float32, or the mission's in float64 when ``exact``). A grid without a wheel
-    unit gets no rows."""
-    mission = spec.mission if exact else training_mission(spec.mission, spec.diffsim.substeps)
-    valid = [i for i, g in enumerate(grids) if (g >= ACTUATOR).any()]
-    out: list[list[dict]] = [[] for _ in grids]
-    if not valid:
-        return out
-    designs = [Design.from_grid(grids[i], spec.modules) for i in valid for _ in range(slews)]
-    controller = controller_for(policy, grids[valid[0]], spec)
-    with torch.no_grad():
-        mc = monte_carlo(
-            designs,
-            controller,
-            mission,
-            spec.modules,
-            episodes=len(designs),
-            seed=seed,
-            dtype=torch.float64 if exact else torch.float32,
-            slews=slews,
-            compiled=spec.diffsim.compiled and not exact,  # the training's design scores, not the validation
-        )
-    for j, i in enumerate(valid):
-        out[i] = mc.episodes[j * slews : (j + 1) * slews]
-    return out
+    """Each grid flown by ``policy`` on the same slews (:func:`~modsat_core.training.diffsim_codesign.fly_grids`)."""
+    return fly_grids(spec, policy, grids, slews, seed, exact)
 
 
 def mean_time_s(episodes: list[dict], episode_s: float) -> float:
