@@ -9,7 +9,8 @@ float64, the mission's physics):
 - ``codesign``: the run's front (its candidates' non-dominated set, chosen on the validation slews);
 - ``nsga2``: the front of NSGA-II (pymoo) searching the same design space (each free cell empty, structure
   or a wheel unit of any catalog type; the payload kept) with the same controller as its evaluator on the
-  training physics and ``design_slews`` slews, for as many design evaluations as the run drew;
+  training physics and ``design_slews`` slews, for as many design evaluations as the run made (its draws
+  and its local search's flights);
 - ``random``: the non-dominated set of ``designs`` random valid designs of that space.
 
 Every front is the non-dominated set over (mass kg, median settling s) of the designs that land every
@@ -172,6 +173,7 @@ def bench_pareto(
         bench_seed = spec.evaluation.seed + 3
         drawn = sum(len(spec.objective.trade_off_prices_s_per_kg) for _ in curve.get("designs", []))
         evaluations = drawn * max(4, spec.diffsim.design_batch // len(spec.objective.trade_off_prices_s_per_kg))
+        evaluations += curve.get("front_search", {}).get("designs_flown", 0)  # the run's local search
         run_front = [np.asarray(p["grid"], dtype=np.int64) for p in curve["front"]]
         fronts = {
             "codesign": front_of(spec, policy, run_front, slews, bench_seed),

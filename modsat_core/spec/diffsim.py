@@ -141,6 +141,17 @@ class Diffsim(_Section):
             "a uniform start draws satellites of hundreds of modules; a sparse start draws small ones."
         ),
     )
+    front_search_designs: int = Field(
+        0,
+        ge=0,
+        le=100_000,
+        description=(
+            "`diffsim-codesign` with `objective.trade_off_prices_s_per_kg`: after training, how many designs "
+            "the local search flies (the candidates, then neighbours of the non-dominated ones: one free cell "
+            "changed, or two swapped), each on `design_slews` slews of the training physics; the non-dominated "
+            "ones join the candidates for the validation slews. 0: no search."
+        ),
+    )
     design_lr: float = Field(
         0.1, gt=0.0, le=10.0, description="`diffsim-codesign`: Adam learning rate of the per-cell type logits."
     )

@@ -236,8 +236,11 @@ CHECKPOINT_BYTES_PER_S = 50e6
 #: The largest replay buffer a checkpoint carries (``CHECKPOINT_BUFFER_LIMIT_BYTES``, training/checkpoint.py).
 CHECKPOINT_BUFFER_BYTES = 256 * 2**20
 #: Designs a trade-off flies at the end (per price the mode and ``TOP_DRAWS`` = 3 best draws, and
-#: ``ARCHIVE_CANDIDATES`` = 16 points of the archive); a single-price co-design flies 1 + 3.
-TRADE_OFF_EXTRA_CANDIDATES = 16
+#: ``ARCHIVE_CANDIDATES`` = 16 points of the archive and ``SEARCH_CANDIDATES`` = 16 of the local search's
+#: front); a single-price co-design flies 1 + 3.
+TRADE_OFF_EXTRA_CANDIDATES = 32
+#: The trade-off's local search (`diffsim.front_search_designs`) flies at most this many designs a round.
+FRONT_SEARCH_ROUND = 32
 HOUR = 3600.0
 
 
@@ -347,6 +350,10 @@ def work(spec: JobSpec) -> Work:
         flights = design_updates * T * sub
         design = _substeps_s(flights, flights * draws * d.design_slews, K)
         design += design_updates * T * draws * d.design_slews * policy_flops / FLOPS
+        if prices and d.front_search_designs:  # the local search's rounds, each one batch of flights
+            rounds = 1 + -(-d.front_search_designs // FRONT_SEARCH_ROUND)
+            sats = d.front_search_designs * d.design_slews * T * sub
+            design += _substeps_s(rounds * T * sub, sats, K) + sats / sub * policy_flops / FLOPS
     curve_sats = points * t.eval_episodes * T
     final_sats = finals * 2 * e.episodes * (1 + conditions) * T
     batches = (points + finals * 4) * T * fs

@@ -159,6 +159,7 @@ def _trade_off(
     wheels: list[str] = _CUBESAT_WHEELS,
     prices: tuple[float, ...] = (0.1, 0.3, 1.0, 3.0),
     control_every: int | None = None,
+    front_search: int = 512,
 ) -> JobSpec:
     """A trade-off preset (docs/requirements.md): a payload plate (the k = 0 layer, ``payload_kg`` a cell),
     0.2 kg structure modules, wheel units of ``wheels``, the requirements (every slew to 90 deg settled to
@@ -199,7 +200,7 @@ def _trade_off(
             "objective": {"trade_off_prices_s_per_kg": list(prices)},
             "randomise": FLIGHT_READY,
             "training": _first_order_budget(updates),
-            **extra,
+            "diffsim": {**extra.pop("diffsim", {}), "front_search_designs": front_search},
         }
     )
 

@@ -65,6 +65,7 @@ from modsat_core.training.diffsim_codesign import (
     load_design_state,
     mode_grid,
 )
+from modsat_core.training.front_search import local_search
 
 #: Fewest draws a distribution takes at a design update.
 MIN_DRAWS = 4
@@ -73,7 +74,9 @@ MIN_DRAWS = 4
 FLIGHT_READY_SHARE = 0.99
 #: Most points of the run's archive (the non-dominated draws) that join the final candidates, spread
 #: over its range of mass (admission's estimates count them: modsat_core.spec.limits).
-ARCHIVE_CANDIDATES = TRADE_OFF_EXTRA_CANDIDATES
+ARCHIVE_CANDIDATES = 16
+#: The local search's non-dominated points that join the candidates, at most (spread over its mass range).
+SEARCH_CANDIDATES = TRADE_OFF_EXTRA_CANDIDATES - ARCHIVE_CANDIDATES
 
 
 def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[list[dict]]:
@@ -161,6 +164,8 @@ class ParetoRun(DiffsimRun):
         #: The non-dominated draws of the whole run over (mass, median settling on their design slews),
         #: among those that landed every slew: {"grid", "mass_kg", "settling_s", "price"}, lightest first.
         self.archive: list[dict] = []
+        #: What the local search flew (set by :meth:`searched`; None without one).
+        self.search: dict[str, int] | None = None
         #: Told what the front's evaluation flies next (train() reports it as the evaluation's stage).
         self.on_stage: Callable[[str], None] = lambda _what: None
         super().__init__(spec, device)
@@ -290,6 +295,8 @@ class ParetoRun(DiffsimRun):
         spec, ev = self.spec, self.spec.evaluation
         episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
         cands = self.candidates() or [(self.grid, self.prices[len(self.prices) // 2])]
+        if spec.diffsim.front_search_designs:
+            cands += self.searched(policy, cands)
         pol = copy.deepcopy(policy).cpu().double().eval()
         self.on_stage(f"the trade-off: {len(cands)} candidate designs on {ev.episodes} validation slews")
         flown = fly(spec, pol, [g for g, _ in cands], ev.episodes, ev.seed + 1, exact=True)
@@ -315,6 +322,25 @@ class ParetoRun(DiffsimRun):
         for r in records:
             r.pop("_episodes")
         return records, front
+
+    def searched(self, policy: torch.nn.Module, cands: list[tuple[np.ndarray, float]]) -> list[tuple[Any, float]]:
+        """The local search's non-dominated points that are not candidates yet (at most
+        :data:`SEARCH_CANDIDATES`, spread over their mass range), each with its starting candidate's price
+        (:func:`~modsat_core.training.front_search.local_search`); ``self.search`` says what it flew."""
+        budget = self.spec.diffsim.front_search_designs
+        slews = self.d.design_slews
+
+        def told(flown: int, budget: int) -> None:
+            self.on_stage(f"the trade-off: local search, {flown} of {budget} designs flown on {slews} slews each")
+
+        pol = copy.deepcopy(policy).cpu().float().eval()
+        found, flown = local_search(self.spec, pol, [g for g, _ in cands], budget, told)
+        new = [p for p in found if not any(np.array_equal(p["grid"], g) for g, _ in cands)]
+        if len(new) > SEARCH_CANDIDATES:
+            idx = np.unique(np.round(np.linspace(0, len(new) - 1, SEARCH_CANDIDATES)).astype(int))
+            new = [new[i] for i in idx]
+        self.search = {"designs_flown": flown, "slews": slews, "front": len(found), "new_candidates": len(new)}
+        return [(p["grid"], cands[p["start"]][1]) for p in new]
 
     def flown_front(self, pool: list[dict[str, Any]], pol: torch.nn.Module) -> list[dict[str, Any]]:
         """The non-dominated records of ``pool`` over (mass, median settling), lightest first, each flown
@@ -380,6 +406,8 @@ class ParetoRun(DiffsimRun):
             "front_hypervolume": hypervolume(np.asarray([[r["mass_kg"], r["median_settling_s"]] for r in front]), ref),
             "kept": {"grid": kept["grid"], "meets_requirements": bool(kept.get("meets", False))},
         }
+        if self.search is not None:
+            extra["front_search"] = self.search
         actor = actor_from_state(self.spec, {k: v.cpu() for k, v in self.policy.state_dict().items()})
         return actor, np.asarray(kept["grid"], dtype=np.int64), extra
 
