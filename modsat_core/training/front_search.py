@@ -4,7 +4,9 @@ candidates, and the non-dominated ones join the candidates (docs/requirements.md
 The design distributions and the archive find the front's region; two designs of the same mass there can
 still differ by a few percent in settling time by where their wheel units sit, and a draw that lands on
 the better arrangement is luck. The search asks for it directly: each round takes the non-dominated
-points flown so far (over mass and median settling time, among those that landed every slew), draws
+points flown so far (over mass and mean settling time, a failed slew counting the episode, among those
+that landed every slew: the distributions' and NSGA-II's smoother statistic; on 8 slews the median picked
+a worse arrangement at the same mass, docs/lab/2026-12-07-front-local-search.md), draws
 neighbours of them (one free cell changed to another part, or two free cells of different parts swapped;
 the payload kept, a cell cut off from it dropped) that were never flown, and flies them all on the same
 ``design_slews`` slews of the training physics (common slews, so that two neighbours differ by their
@@ -93,10 +95,10 @@ def local_search(
 ) -> tuple[list[dict[str, Any]], int]:
     """The search (module docstring) from ``starts``, flown by ``policy`` (float32, the training physics).
 
-    Returns the non-dominated points it flew, lightest first, each ``{"grid", "mass_kg", "settling_s",
-    "start"}`` (``start``: the index in ``starts`` of the candidate it descends from), and how many designs
-    it flew. ``on_round(flown, budget)`` is told before each round."""
-    from modsat_core.training.diffsim_pareto import median_settling_s, nondominated
+    Returns the non-dominated points it flew over (mass, mean settling time), lightest first, each
+    ``{"grid", "mass_kg", "mean_time_s", "start"}`` (``start``: the index in ``starts`` of the candidate
+    it descends from), and how many designs it flew. ``on_round(flown, budget)`` is told before each round."""
+    from modsat_core.training.diffsim_pareto import mean_time_s, nondominated
 
     d = spec.diffsim
     fixed, types = fixed_cells(spec.design, spec.objective, spec.modules)
@@ -116,7 +118,7 @@ def local_search(
                     {
                         "grid": g,
                         "mass_kg": design_mass_kg(g, spec.modules),
-                        "settling_s": median_settling_s(eps, episode_s),
+                        "mean_time_s": mean_time_s(eps, episode_s),
                         "start": o,
                     }
                 )
@@ -134,7 +136,7 @@ def local_search(
     def front() -> list[dict[str, Any]]:
         if not points:
             return []
-        keep = nondominated(np.asarray([[p["mass_kg"], p["settling_s"]] for p in points]))
+        keep = nondominated(np.asarray([[p["mass_kg"], p["mean_time_s"]] for p in points]))
         return sorted([p for p, k in zip(points, keep, strict=True) if k], key=lambda p: p["mass_kg"])
 
     while spent < budget:
