@@ -18,8 +18,12 @@ The run keeps an archive of its draws: those that landed every design slew, redu
 update to the non-dominated set over (mass, median settling); it fills the gaps between the prices' optima
 and costs no flight (the bench gives NSGA-II as many design evaluations).
 
-At the end the candidates (each distribution's mode and its best draws, and up to
-:data:`ARCHIVE_CANDIDATES` archive points spread over its mass range) fly the validation slews
+After training, a local search (``diffsim.front_search_designs``; :mod:`~modsat_core.training.front_search`)
+flies neighbours of the candidates' non-dominated ones; up to :data:`SEARCH_CANDIDATES` of its
+non-dominated points join the candidates.
+
+At the end the candidates (each distribution's mode and its best draws, up to
+:data:`ARCHIVE_CANDIDATES` archive points spread over its mass range, and the search's) fly the validation slews
 (``evaluation.episodes``, the mission's physics, float64). The front is their non-dominated set over
 (mass, median settling time) among those that land every slew and are flight-ready (moocore): the
 non-dominated points fly every flight condition of ``evaluation.conditions``; a point that lands less than

@@ -1,5 +1,5 @@
 """The trade-off's local search: after training, the run's controller flies neighbours of the front's
-candidates, and the non-dominated ones join the candidates (docs/requirements.md, "The local search").
+candidates, and the non-dominated ones join the candidates (docs/requirements.md, "The trade-off").
 
 The design distributions and the archive find the front's region; two designs of the same mass there can
 still differ by a few percent in settling time by where their wheel units sit, and a draw that lands on
