@@ -316,6 +316,7 @@ PRESETS: dict[str, JobSpec] = {
         wheels=_ALL_WHEELS,
         prices=(0.03, 0.1, 0.3, 1.0),
         control_every=5,
+        front_search=0,  # the local search is not measured on the big grids yet: off, so their stated times hold
     ),
     "trade-off-10x10x10": _trade_off(
         10,
@@ -326,6 +327,7 @@ PRESETS: dict[str, JobSpec] = {
         episode_steps=600,
         wheels=_ALL_WHEELS,
         control_every=10,
+        front_search=0,
     ),
 }
 
