@@ -69,7 +69,7 @@ from modsat_core.training.diffsim_codesign import (
     load_design_state,
     mode_grid,
 )
-from modsat_core.training.front_search import local_search
+from modsat_core.training.front_search import local_search, mean_time_s, nondominated
 
 #: Fewest draws a distribution takes at a design update.
 MIN_DRAWS = 4
@@ -88,28 +88,11 @@ def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: i
     return fly_grids(spec, policy, grids, slews, seed, exact)
 
 
-def mean_time_s(episodes: list[dict], episode_s: float) -> float:
-    """Mean settling time, a failed slew counting the whole episode (no rows: worse than any design)."""
-    if not episodes:
-        return 2.0 * episode_s
-    return float(np.mean([e["settling_time_s"] if e["success"] else episode_s for e in episodes]))
-
-
 def median_settling_s(episodes: list[dict], episode_s: float) -> float:
     """Median settling time, a failed slew counting the whole episode."""
     if not episodes:
         return episode_s
     return float(np.median([e["settling_time_s"] if e["success"] else episode_s for e in episodes]))
-
-
-def nondominated(points: np.ndarray) -> np.ndarray:
-    """(P,) bool: the points (P, 2) no other point is at least as good as in both and better in one
-    (moocore's; minimised)."""
-    import moocore
-
-    if len(points) == 0:
-        return np.zeros(0, dtype=bool)
-    return np.asarray(moocore.is_nondominated(np.asarray(points, dtype=np.float64)), dtype=bool)
 
 
 def hypervolume(points: np.ndarray, ref: tuple[float, float]) -> float:

@@ -33,6 +33,23 @@ from modsat_core.training.diffsim_codesign import fixed_cells, fly_grids, satell
 TRIES_PER_NEIGHBOUR = 20
 
 
+def mean_time_s(episodes: list[dict], episode_s: float) -> float:
+    """Mean settling time, a failed slew counting the whole episode (no rows: worse than any design)."""
+    if not episodes:
+        return 2.0 * episode_s
+    return float(np.mean([e["settling_time_s"] if e["success"] else episode_s for e in episodes]))
+
+
+def nondominated(points: np.ndarray) -> np.ndarray:
+    """(P,) bool: the points (P, 2) no other point is at least as good as in both and better in one
+    (moocore's; minimised)."""
+    import moocore
+
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    return np.asarray(moocore.is_nondominated(np.asarray(points, dtype=np.float64)), dtype=bool)
+
+
 def _adjacent(occupied: np.ndarray) -> np.ndarray:
     """(N, N, N) bool: the cells face-adjacent to an occupied one, or occupied."""
     out = occupied.copy()
@@ -98,8 +115,6 @@ def local_search(
     Returns the non-dominated points it flew over (mass, mean settling time), lightest first, each
     ``{"grid", "mass_kg", "mean_time_s", "start"}`` (``start``: the index in ``starts`` of the candidate
     it descends from), and how many designs it flew. ``on_round(flown, budget)`` is told before each round."""
-    from modsat_core.training.diffsim_pareto import mean_time_s, nondominated
-
     d = spec.diffsim
     fixed, types = fixed_cells(spec.design, spec.objective, spec.modules)
     cell_types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
