@@ -34,9 +34,8 @@ from modsat_core.bench.learners import _cpu_model, timed_train
 from modsat_core.grid import ACTUATOR
 from modsat_core.spec.jobspec import JobSpec, parse_spec
 from modsat_core.spec.presets import get_preset
-from modsat_core.training.diffsim_codesign import fixed_cells, satellites
+from modsat_core.training.diffsim_codesign import cell_types, fixed_cells, fly_grids, satellites
 from modsat_core.training.diffsim_pareto import (
-    fly,
     hypervolume,
     mean_time_s,
     nondominated,
@@ -48,10 +47,6 @@ from modsat_core.training.diffsim_pareto import (
 MARGIN = 0.02
 #: NSGA-II's population.
 POPULATION = 32
-
-
-def cell_types(spec: JobSpec) -> int:
-    return ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
 
 
 def random_designs(spec: JobSpec, n: int, seed: int) -> list[np.ndarray]:
@@ -95,7 +90,7 @@ def nsga2_designs(spec: JobSpec, policy: Any, evaluations: int, seed: int) -> li
 
         def _evaluate(self, X: np.ndarray, out: dict, *args: Any, **kwargs: Any) -> None:
             grids = grids_of(X)
-            flown = fly(spec, policy, grids, spec.diffsim.design_slews, int(rng.integers(2**31)), exact=False)
+            flown = fly_grids(spec, policy, grids, spec.diffsim.design_slews, int(rng.integers(2**31)), exact=False)
             heavy = reference_point(spec)[0]
             out["F"] = np.asarray(
                 [
@@ -124,7 +119,7 @@ def front_of(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, se
     for g in grids:
         if not any(np.array_equal(g, u) for u in unique):
             unique.append(g)
-    flown = fly(spec, policy, unique, slews, seed, exact=True)
+    flown = fly_grids(spec, policy, unique, slews, seed, exact=True)
     records = [point_record(spec, g, e, episode_s) for g, e in zip(unique, flown, strict=True)]
     landed = [r for r in records if r["success"] >= 1.0]
     if not landed:

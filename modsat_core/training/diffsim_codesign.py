@@ -131,6 +131,12 @@ def fixed_cells(
     return mask, types
 
 
+def cell_types(spec: JobSpec) -> int:
+    """How many parts a design cell chooses among: empty, structure and each wheel type of the catalog
+    (one wheel unit type without one)."""
+    return ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
+
+
 def initial_design(design_space: DesignSpace, objective: Objective, catalog: ModuleCatalog | None = None) -> np.ndarray:
     """The paper's initial design, (N, N, N) int64: the full cube of structure modules whose centre
     module is a wheel unit (a parts catalog's first), the fixed cells as :func:`fixed_cells` gives them
@@ -269,7 +275,7 @@ class DiffsimCodesignRun(DiffsimRun):
         N = spec.design.grid_size
         self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective, spec.modules)
         # a cell's types: empty, structure, and each wheel unit type of the parts catalog
-        types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
+        types = cell_types(spec)
         self.logits = initial_logits((N**3, types), spec.diffsim.design_empty_prior)
         self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
         self.design_rng = np.random.default_rng([spec.seed, 5])

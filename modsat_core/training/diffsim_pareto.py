@@ -59,6 +59,7 @@ from modsat_core.training.diffsim_codesign import (
     TOP_DRAWS,
     best_from_state,
     best_to_state,
+    cell_types,
     design_state,
     draw_grids,
     first_designs,
@@ -81,11 +82,6 @@ FLIGHT_READY_SHARE = 0.99
 ARCHIVE_CANDIDATES = 16
 #: The local search's non-dominated points that join the candidates, at most (spread over its mass range).
 SEARCH_CANDIDATES = TRADE_OFF_EXTRA_CANDIDATES - ARCHIVE_CANDIDATES
-
-
-def fly(spec: JobSpec, policy: Any, grids: list[np.ndarray], slews: int, seed: int, exact: bool) -> list[list[dict]]:
-    """Each grid flown by ``policy`` on the same slews (:func:`~modsat_core.training.diffsim_codesign.fly_grids`)."""
-    return fly_grids(spec, policy, grids, slews, seed, exact)
 
 
 def median_settling_s(episodes: list[dict], episode_s: float) -> float:
@@ -141,7 +137,7 @@ class ParetoRun(DiffsimRun):
         self.prices = list(spec.objective.trade_off_prices_s_per_kg)
         L = len(self.prices)
         self.fixed, self.fixed_types = fixed_cells(spec.design, spec.objective, spec.modules)
-        types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
+        types = cell_types(spec)
         self.logits = initial_logits((L, N**3, types), spec.diffsim.design_empty_prior)
         self.design_opt = torch.optim.Adam([self.logits], lr=spec.diffsim.design_lr)
         self.design_rng = np.random.default_rng([spec.seed, 5])
@@ -196,7 +192,7 @@ class ParetoRun(DiffsimRun):
         seed = int(self.design_rng.integers(2**31))
         policy = copy.deepcopy(self.policy).cpu().eval()
         episode_s = self.spec.mission.episode_steps * self.spec.mission.control_dt_s
-        flown = fly(self.spec, policy, grids, self.d.design_slews, seed, exact=False)
+        flown = fly_grids(self.spec, policy, grids, self.d.design_slews, seed, exact=False)
         times = [mean_time_s(e, episode_s) for e in flown]
         self.update_archive(grids, flown, [self.prices[i // M] for i in range(len(grids))], episode_s)
         self.design_opt.zero_grad(set_to_none=True)
@@ -286,7 +282,7 @@ class ParetoRun(DiffsimRun):
             cands += self.searched(policy, cands)
         pol = copy.deepcopy(policy).cpu().double().eval()
         self.on_stage(f"the trade-off: {len(cands)} candidate designs on {ev.episodes} validation slews")
-        flown = fly(spec, pol, [g for g, _ in cands], ev.episodes, ev.seed + 1, exact=True)
+        flown = fly_grids(spec, pol, [g for g, _ in cands], ev.episodes, ev.seed + 1, exact=True)
         records = []
         for (g, price), episodes in zip(cands, flown, strict=True):
             r = point_record(spec, g, episodes, episode_s)

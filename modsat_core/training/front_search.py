@@ -26,7 +26,7 @@ from modsat_core.grid import ACTUATOR, EMPTY
 from modsat_core.spec.jobspec import JobSpec
 from modsat_core.spec.limits import FRONT_SEARCH_ROUND
 from modsat_core.spec.parts import design_mass_kg
-from modsat_core.training.diffsim_codesign import fixed_cells, fly_grids, satellites
+from modsat_core.training.diffsim_codesign import cell_types, fixed_cells, fly_grids, satellites
 
 #: How many tries a round makes per neighbour it wants before it gives up on a parent (every move of a
 #: small grid may already have been flown).
@@ -117,7 +117,7 @@ def local_search(
     it descends from), and how many designs it flew. ``on_round(flown, budget)`` is told before each round."""
     d = spec.diffsim
     fixed, types = fixed_cells(spec.design, spec.objective, spec.modules)
-    cell_types = ACTUATOR + (len(spec.modules.wheels) if spec.modules.wheels else 1)
+    T = cell_types(spec)
     episode_s = spec.mission.episode_steps * spec.mission.control_dt_s
     rng = np.random.default_rng([spec.seed, 13])
     slews_seed = int(rng.integers(2**31))
@@ -166,7 +166,7 @@ def local_search(
         origin: list[int] = []
         for p in parents:
             expanded.add(p["grid"].tobytes())
-            for h in neighbours(p["grid"], min(each, want - len(grids)), rng, seen, fixed, types, cell_types):
+            for h in neighbours(p["grid"], min(each, want - len(grids)), rng, seen, fixed, types, T):
                 grids.append(h)
                 origin.append(p["start"])
             if len(grids) >= want:
