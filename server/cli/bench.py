@@ -159,7 +159,12 @@ def _cmd_bench_pareto(args: argparse.Namespace) -> int:
 
     # the seeds so far go to --out after each one: a stopped bench keeps them
     report = bench_pareto(
-        args.preset, args.seeds, args.designs, args.slews, on_seed=lambda r: write_report(r, args.out)
+        args.preset,
+        args.seeds,
+        args.designs,
+        args.slews,
+        on_seed=lambda r: write_report(r, args.out),
+        ga=not args.no_ga,
     )
     print_report(report, args.out)
     return 0
@@ -337,12 +342,15 @@ def add_bench_parsers(sub) -> None:
 
     bp = bsub.add_parser(
         "pareto",
-        help="the trade-off run's front against NSGA-II's and random designs', one controller (JSON)",
+        help="the trade-off run's front against NSGA-II's, random designs' and a GA's with a controller per design",
     )
     bp.add_argument("--preset", default="trade-off-3x3x3", help="a trade-off preset (default trade-off-3x3x3)")
     bp.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds (default 0)")
     bp.add_argument("--designs", type=int, default=100, help="random designs (default 100)")
     bp.add_argument("--slews", type=int, default=32, help="bench slews each design flies (default 32)")
+    bp.add_argument(
+        "--no-ga", action="store_true", help="leave out the GA with a controller per design (the paper's method)"
+    )
     bp.add_argument("--json", action="store_true", help="accepted for symmetry: the report is JSON")
     bp.add_argument("--out", help="also write the JSON report to this file")
     bp.set_defaults(func=_cmd_bench_pareto, threads=None)

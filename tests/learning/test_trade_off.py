@@ -169,3 +169,26 @@ def test_the_fronts_arithmetic():
     spec = tiny_trade_off()
     for g in random_designs(spec, 20, 0):
         assert is_valid(g) and g[0, 0, 0] == STRUCTURE
+
+
+def test_the_ga_trains_each_design_its_own_controller_within_the_update_budget(monkeypatch):
+    import modsat_core.bench.pareto as pareto
+
+    calls: list[tuple[np.ndarray, int]] = []
+    real = pareto.own_controller
+
+    def spy(spec, grid, updates, seed):
+        calls.append((np.asarray(grid), updates))
+        return real(spec, grid, updates, seed)
+
+    monkeypatch.setattr(pareto, "own_controller", spy)
+    out = pareto.ga_inner_front(tiny_trade_off(), updates=8, slews=3, seed=0, bench_seed=5, population=2, per_design=2)
+    # two generations of two designs, each its own controller of two updates: never past the budget
+    assert out["designs_trained"] == len(calls) >= 3
+    assert out["updates"] == 2 * len(calls) <= 8
+    assert all(u == 2 for _, u in calls)
+    assert all((g >= ACTUATOR).any() for g, _ in calls)
+    assert len({g.tobytes() for g, _ in calls}) == len(calls)  # no design trained twice
+    trained = {g.tobytes() for g, _ in calls}
+    for p in out["front"]:  # the front: designs it trained that landed every bench slew
+        assert np.asarray(p["grid"]).tobytes() in trained and p["success"] == 1.0
