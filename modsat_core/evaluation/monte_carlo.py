@@ -106,7 +106,8 @@ def monte_carlo(
         record: number of leading episodes whose time histories are returned.
         slews: if set, episode i flies slew ``i % slews`` of the seed's set (several designs
             on the same slews); else episode i flies slew i.
-        compiled: the physics step fused by ``torch.compile`` (``diffsim.compiled``'s design scoring).
+        compiled: the physics step fused by ``torch.compile`` (``diffsim.compiled``'s design scoring,
+            ``evaluation.compiled``'s evaluation).
     """
     if isinstance(designs, Design):
         designs = [designs] * episodes
@@ -129,11 +130,13 @@ def monte_carlo_conditions(
     seed: int,
     dtype: torch.dtype = torch.float64,
     device: str = "cpu",
+    compiled: bool = False,
 ) -> dict[str, MonteCarloResult]:
     """:func:`monte_carlo` under each of ``conditions`` (all in one batch): condition name -> result.
 
     Row ``c * episodes + i`` flies episode ``i`` of the seed's set under condition ``c``; the
-    controller believes the design's inertia and sees measured states (:class:`Flight`)."""
+    controller believes the design's inertia and sees measured states (:class:`Flight`). ``compiled``:
+    the physics step fused by ``torch.compile`` (``evaluation.compiled``)."""
     if isinstance(designs, Design):
         designs = [designs] * episodes
     if len(designs) != episodes:
@@ -154,7 +157,7 @@ def monte_carlo_conditions(
         draws += [draw_episode(r, m) for r in episode_rngs(seed, episodes)]
     I_true, draws = perturb(I_model, draws, rows, ax)
     all_designs = [replace(d, I_B=I) for d, I in zip(designs * C, I_true)]
-    sim = SlewSim.from_designs(all_designs, mission, modules, dtype=dtype, device=device)
+    sim = SlewSim.from_designs(all_designs, mission, modules, dtype=dtype, device=device, compiled=compiled)
     sim.reset(list(range(C * episodes)), draws)
     flight = Flight(sim, max_delay=max_delay(conditions), seed=seed)
     kw: dict[str, Any] = dict(dtype=sim.dtype, device=sim.device)

@@ -142,7 +142,9 @@ def final_evaluation(
         out["trajectories"] = {"policy": [], "pd_baseline": []}
         return out
     design = Design.from_grid(grid, spec.modules)
-    kw: dict[str, Any] = dict(episodes=n, seed=ev.seed, record=min(ev.trajectories, n), dtype=torch.float64)
+    kw: dict[str, Any] = dict(
+        episodes=n, seed=ev.seed, record=min(ev.trajectories, n), dtype=torch.float64, compiled=ev.compiled
+    )
     stage(f"the policy on {n} nominal slews")
     mc = monte_carlo(design, controller_for(actor, grid, spec), spec.mission, spec.modules, **kw)
     stage(f"PD on the same {n} slews")
@@ -193,7 +195,8 @@ def condition_table(
     conditions = spec.evaluation.conditions
     if not conditions:
         return [], {}
-    kw: dict[str, Any] = dict(episodes=episodes, seed=spec.evaluation.seed, dtype=torch.float64)
+    ev = spec.evaluation
+    kw: dict[str, Any] = dict(episodes=episodes, seed=ev.seed, dtype=torch.float64, compiled=ev.compiled)
     m, mods = spec.mission, spec.modules
     stage = on_stage or (lambda _what: None)
     names = ", ".join(c.name for c in conditions)

@@ -163,7 +163,8 @@ def fly_grids(
     """Each grid flown by ``controller`` on the same ``slews`` slews of ``seed``: its monte_carlo rows.
     ``controller``: a design-conditioned :class:`~modsat_core.agent.diffsim_policy.DiffsimPolicy`, or a
     controller class such as :class:`~modsat_core.sim.pd.PDController`. The training physics in float32
-    (compiled with ``diffsim.compiled``), or the mission's in float64 when ``exact``. A grid without a
+    (compiled with ``diffsim.compiled``), or the mission's in float64 when ``exact`` (compiled with
+    ``evaluation.compiled``). A grid without a
     wheel unit gets no rows."""
     from modsat_core.agent.diffsim_policy import DiffsimPolicy
     from modsat_core.agent.policy import controller_for
@@ -186,7 +187,8 @@ def fly_grids(
             seed=seed,
             dtype=torch.float64 if exact else torch.float32,
             slews=slews,
-            compiled=spec.diffsim.compiled and not exact,  # the training's design scores, not the validation
+            # the training's design scores (diffsim.compiled), or the validation's (evaluation.compiled)
+            compiled=spec.evaluation.compiled if exact else spec.diffsim.compiled,
         )
     for j, i in enumerate(valid):
         out[i] = mc.episodes[j * slews : (j + 1) * slews]
@@ -464,6 +466,7 @@ class DiffsimCodesignRun(DiffsimRun):
                     episodes=ev.episodes,
                     seed=ev.seed + 1,
                     dtype=torch.float64,
+                    compiled=ev.compiled,
                 )
             conds = {c.name: sum(bool(e["success"]) for e in res[c.name].episodes) / ev.episodes for c in ev.conditions}
             selection[i]["conditions"] = conds

@@ -356,6 +356,7 @@ class ParetoRun(DiffsimRun):
                     episodes=ev.episodes,
                     seed=ev.seed,
                     dtype=torch.float64,
+                    compiled=ev.compiled,
                 )
             flights = [(c, res[c.name].episodes) for c in ev.conditions]
         conds = {c.name: sum(bool(e["success"]) for e in eps) / len(eps) for c, eps in flights}

@@ -239,3 +239,22 @@ def test_slots_grown_mid_flight_are_empty_and_change_nothing_of_the_flight():
     torch.testing.assert_close(b.sim.state.omega_B, a.sim.state.omega_B, rtol=1e-12, atol=1e-12)
     torch.testing.assert_close(b.sim.state.h_B[:, :K], a.sim.state.h_B, rtol=1e-12, atol=1e-12)
     assert a.sim.state.h_B.abs().sum() > 0  # the wheels did turn
+
+
+@pytest.mark.slow  # compiles the RK4 step in float64 (inductor): a minute or more on a busy 2-core CPU
+def test_a_compiled_evaluation_flies_the_conditions_as_the_eager_one():
+    """``evaluation.compiled``: the same slews under the same conditions, PD flying the three-unit design
+    (much torque for its inertia), give the same episodes to float64 rounding."""
+    d = Design.from_grid(THREE, SPEC.modules)
+    conds = [STANDARD_CONDITIONS[n] for n in ("delay-1", "weak-wheels", "combined")]
+    kw = dict(episodes=5, seed=4, dtype=torch.float64)
+    eager = monte_carlo_conditions(d, PDController, MISSION, SPEC.modules, conds, **kw)
+    fused = monte_carlo_conditions(d, PDController, MISSION, SPEC.modules, conds, compiled=True, **kw)
+    from modsat_core.sim import dynamics
+
+    assert dynamics._COMPILED is not None  # the fused step was built and flown
+    for c in conds:
+        for e, f in zip(eager[c.name].episodes, fused[c.name].episodes, strict=True):
+            assert f["success"] == e["success"] and f["safety_violation"] == e["safety_violation"]
+            assert f["final_error_deg"] == pytest.approx(e["final_error_deg"], rel=1e-9, abs=1e-9)
+            assert f["return"] == pytest.approx(e["return"], rel=1e-9)
