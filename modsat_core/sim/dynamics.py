@@ -31,6 +31,9 @@ enters the rate equation as a linear function of time.
 from __future__ import annotations
 
 import math
+import os
+import shutil
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import cast
@@ -252,5 +255,15 @@ def compiled_physics_step() -> PhysicsStep:
     physics")."""
     global _COMPILED
     if _COMPILED is None:
+        if not has_cxx_compiler():  # inductor builds C++ kernels: without a compiler, fly eager
+            warnings.warn(
+                "no C++ compiler (g++, or $CXX) found: the physics step flies eager, not compiled", stacklevel=2
+            )
+            return physics_step
         _COMPILED = cast(PhysicsStep, torch.compile(physics_step, dynamic=None))
     return _COMPILED
+
+
+def has_cxx_compiler() -> bool:
+    """Whether the C++ compiler inductor builds its CPU kernels with (``$CXX``, else g++) is on the PATH."""
+    return shutil.which(os.environ.get("CXX") or "g++") is not None

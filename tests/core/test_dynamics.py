@@ -212,3 +212,13 @@ def test_the_compiled_physics_step_flies_as_the_eager_one():
     assert out["eager"][2].abs().max() == pytest.approx(1e-3)  # a wheel at its capacity
     for eager, compiled in zip(out["eager"], out["compiled"], strict=True):
         assert torch.allclose(eager, compiled, rtol=1e-4, atol=1e-6)
+
+
+def test_without_a_cxx_compiler_the_compiled_step_is_the_eager_one(monkeypatch):
+    """Inductor builds C++ kernels: where no compiler is found, a run asking for the fused step flies the
+    eager one (with a warning) instead of failing at its first step."""
+    monkeypatch.setattr(dyn, "_COMPILED", None)
+    monkeypatch.setattr(dyn.shutil, "which", lambda _name: None)
+    with pytest.warns(UserWarning, match="no C\\+\\+ compiler"):
+        assert dyn.compiled_physics_step() is dyn.physics_step
+    assert dyn._COMPILED is None
