@@ -210,8 +210,8 @@ class Evaluation(_Section):
             "design) with the RK4 step fused by torch.compile, in float64 as always: 3.9x the eager step's "
             "speed at 256 slews (`modsat bench sim --compiled --dtype float64`), after a compilation of a "
             "minute or more per process. The numbers agree with the eager step to float64 rounding, not bit "
-            "for bit. Pays where the evaluation flies long episodes of many physics steps (the 7x7x7 and "
-            "10x10x10 trade-offs: docs/requirements.md)."
+            "for bit; without a C++ compiler the eager step flies. On in the trade-off presets, whose evaluation "
+            "flies a front under every condition: their runs 2x faster (docs/requirements.md)."
         ),
     )
     basilisk: bool = Field(

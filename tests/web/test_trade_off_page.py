@@ -26,7 +26,8 @@ TINY_TRADE_OFF = {
             "design_slews": 2,
             "design_every": 2,
         },
-        "evaluation": {"episodes": 4, "trajectories": 1, "conditions": ["delay-1"]},
+        # eager: the page is under test, not the fused step (tests/core/test_conditions.py holds it)
+        "evaluation": {"episodes": 4, "trajectories": 1, "conditions": ["delay-1"], "compiled": False},
     },
 }
 
