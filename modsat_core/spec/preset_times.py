@@ -39,7 +39,7 @@ PRESET_TIMES: dict[str, tuple[RunTime, ...]] = {
     "trade-off-3x3x3": (RunTime("219-233 s training", AMD),),
     "trade-off-5x5x5": (RunTime("287-320 s training", AMD),),
     "trade-off-7x7x7": (RunTime("7.9 min", AMD),),
-    "trade-off-10x10x10": (RunTime("9.1 min", AMD),),
+    "trade-off-10x10x10": (RunTime("9.1-13.6 min", AMD),),
     "cpu-3x3x3": (RunTime("42-44 min", AMD), RunTime("46.7 min", INTEL)),
     "quick-td3": (RunTime("9.4 min", AMD), RunTime("6.9 min", INTEL)),
 }
